@@ -1,0 +1,59 @@
+"""Private normalisers shared by the package: convert, check and name arguments."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .exceptions import DimensionError, EmptySetError, InvalidBoundsError
+
+__all__: list[str] = []
+
+
+def as_boxes(data: Any, d: int | None = None, name: str = "X", *,
+             allow_empty: bool = False) -> np.ndarray:
+    """Return a float array of shape ``(N, d, 2)`` from boxes given in any accepted form.
+
+    Accepted: a :class:`~casadi_cmpc.Box`, an ``(N, d, 2)`` array, one ``(d, 2)`` array,
+    or (when ``d == 1``) an ``(N, 2)`` array is *not* guessed: pass ``(N, 1, 2)``.
+    Raises :class:`DimensionError` with the argument name on a wrong shape and
+    :class:`InvalidBoundsError` on NaN bounds; :class:`EmptySetError` when some lower bound
+    exceeds its upper bound (unless ``allow_empty``).
+    """
+    if hasattr(data, "as_array") and not isinstance(data, np.ndarray):
+        data = data.as_array()
+    arr = np.asarray(data, dtype=float)
+    if arr.ndim == 2 and arr.shape[-1] == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[-1] != 2:
+        raise DimensionError(
+            f"{name} must be boxes of shape (N, d, 2) or (d, 2); got shape {arr.shape}")
+    if d is not None and arr.shape[1] != d:
+        raise DimensionError(
+            f"{name} has the wrong dimension; expected {d} instead of {arr.shape[1]}")
+    if np.isnan(arr).any():
+        raise InvalidBoundsError(f"{name} contains NaN bounds")
+    if not allow_empty and (arr[..., 0] > arr[..., 1]).any():
+        i = np.argwhere(arr[..., 0] > arr[..., 1])[0]
+        raise EmptySetError(
+            f"{name} is empty: lower bound {arr[i[0], i[1], 0]} > upper bound "
+            f"{arr[i[0], i[1], 1]} (box {i[0]}, component {i[1]})")
+    return arr
+
+
+def as_points(data: Any, d: int | None = None, name: str = "x") -> tuple[np.ndarray, bool]:
+    """Return ``(points (N, d), was_batched)`` from a point ``(d,)`` or batch ``(N, d)``."""
+    arr = np.asarray(data, dtype=float)
+    batched = arr.ndim == 2
+    if arr.ndim == 0:
+        arr = arr.reshape(1, 1)
+    elif arr.ndim == 1:
+        arr = arr[None] if (d is None or arr.shape[0] == d) else arr[:, None]
+        batched = batched or (d == 1 and arr.shape[0] != 1)
+    if arr.ndim != 2:
+        raise DimensionError(f"{name} must have shape (N, d) or (d,); got {np.shape(data)}")
+    if d is not None and arr.shape[1] != d:
+        raise DimensionError(
+            f"{name} has the wrong dimension; expected {d} instead of {arr.shape[1]}")
+    return arr, batched

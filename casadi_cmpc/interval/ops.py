@@ -1,0 +1,75 @@
+"""Interval operations on arrays whose last axis is ``[lo, hi]``.
+
+Each function takes interval arrays of shape ``(..., 2)`` (e.g. ``(N, d, 2)`` batches) that
+broadcast against each other, and returns one array of the broadcast shape. Rounding and
+domain conventions are those of :mod:`casadi_cmpc.interval.arith`.
+
+>>> import numpy as np, casadi_cmpc as cm
+>>> r = cm.interval.mul(np.array([-1.0, 2.0]), np.array([3.0, 4.0]))
+>>> bool(r[0] <= -4.0 and r[1] >= 8.0)
+True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from . import arith
+
+_UNARY_NAMES = [
+    "neg", "sq", "twice", "inv", "sqrt", "exp", "expm1", "log", "log1p", "sin", "cos", "tan",
+    "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh", "fabs", "floor",
+    "ceil", "sign", "erf", "erfinv",
+]
+_BINARY_NAMES = [
+    "add", "sub", "mul", "div", "pow", "atan2", "fmin", "fmax", "hypot", "copysign", "fmod",
+    "remainder", "lt", "le", "eq", "ne", "if_else_zero", "hull", "intersect",
+]
+_RENAMED = {"not_": "logical_not", "and_": "logical_and", "or_": "logical_or"}
+
+__all__ = _UNARY_NAMES + _BINARY_NAMES + list(_RENAMED.values()) + ["constpow", "powi"]
+
+
+def _unary(core: Callable) -> Callable:
+    def f(a):
+        a = np.asarray(a, dtype=float)
+        lo, hi = core(a[..., 0], a[..., 1])
+        return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
+
+    f.__name__ = core.__name__.rstrip("_")
+    f.__doc__ = (f"Interval extension of ``{f.__name__}`` on arrays of shape (..., 2).")
+    return f
+
+
+def _binary(core: Callable) -> Callable:
+    def f(a, b):
+        a = np.asarray(a, dtype=float)
+        b = np.asarray(b, dtype=float)
+        lo, hi = core(a[..., 0], a[..., 1], b[..., 0], b[..., 1])
+        return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
+
+    f.__name__ = core.__name__.rstrip("_")
+    f.__doc__ = (f"Interval extension of ``{f.__name__}`` on arrays of shape (..., 2).")
+    return f
+
+
+for _n in _UNARY_NAMES + ["not_"]:
+    globals()[_RENAMED.get(_n, _n)] = _unary(getattr(arith, _n))
+for _n in _BINARY_NAMES + ["and_", "or_"]:
+    globals()[_RENAMED.get(_n, _n)] = _binary(getattr(arith, _n))
+
+
+def constpow(a, c: float) -> np.ndarray:
+    """``a ** c`` for a real constant ``c``; a has shape (..., 2)."""
+    a = np.asarray(a, dtype=float)
+    lo, hi = arith.powc(a[..., 0], a[..., 1], c)
+    return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
+
+
+def powi(a, n: int) -> np.ndarray:
+    """``a ** n`` for an integer ``n``; a has shape (..., 2)."""
+    a = np.asarray(a, dtype=float)
+    lo, hi = arith.powi(a[..., 0], a[..., 1], n)
+    return np.stack(np.broadcast_arrays(lo, hi), axis=-1)

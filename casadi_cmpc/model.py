@@ -1,0 +1,553 @@
+"""The discrete-time model x+ = f(x, u, w), written once as CasADi expressions."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ._validate import as_boxes, as_points
+from .exceptions import (
+    DimensionError,
+    FreeSymbolError,
+    ModelError,
+    UnboundedSetError,
+)
+from .interval.compiler import InclusionFunction
+from .sets.box import Box
+
+__all__ = ["Model"]
+
+_WRT = ("x", "u", "w")
+
+
+def _is_symbolic_vector(s: Any) -> bool:
+    return s.is_column() and s.is_valid_input() and (s.numel() == 0 or s.is_symbolic()
+                                                     or all(s[i].is_symbolic()
+                                                            for i in range(s.numel())))
+
+
+def _check_symbol(s: Any, name: str) -> None:
+    if not isinstance(s, ca.SX):
+        raise TypeError(f"{name} must be a casadi.SX column of symbols; got {type(s).__name__}")
+    if not s.is_column():
+        raise DimensionError(f"{name} must be a column vector; got shape {s.shape}")
+    if not _is_symbolic_vector(s):
+        raise ModelError(f"{name} must consist of pure symbols (e.g. casadi.SX.sym('{name}', n)),"
+                         " not expressions")
+
+
+def _to_sx(x: Any, u: Any, w: Any, f: Any) -> tuple[ca.SX, ca.SX, ca.SX | None, ca.SX]:
+    """Convert MX symbols/expression to SX by building and expanding a Function."""
+    mx = [v for v in (x, u, w, f) if isinstance(v, ca.MX)]
+    if not mx:
+        return x, u, w, f
+    if not all(isinstance(v, ca.MX) for v in (x, u, f) if v is not None) or (
+            w is not None and not isinstance(w, ca.MX)):
+        raise TypeError("x, u, w and f must all be casadi.SX (or all casadi.MX, which is "
+                        "converted to SX); got a mixture")
+    ins = [x, u] + ([w] if w is not None else [])
+    try:
+        fun = ca.Function("f_mx", ins, [f]).expand()
+    except Exception as exc:
+        raise TypeError(
+            "the MX model could not be converted to SX (it may contain calls that have no "
+            f"SX form: {exc}); write the model with casadi.SX symbols") from exc
+    xs = ca.SX.sym("x", x.shape[0])
+    us = ca.SX.sym("u", u.shape[0])
+    ws = ca.SX.sym("w", w.shape[0]) if w is not None else None
+    fs = fun(*([xs, us] + ([ws] if ws is not None else [])))
+    return xs, us, ws, fs
+
+
+def _as_model_box(B: Any, d: int, name: str) -> Box:
+    if isinstance(B, Box):
+        box = B
+    else:
+        arr = np.asarray(B, dtype=float) if not isinstance(B, tuple) else None
+        if isinstance(B, tuple) and len(B) == 2:
+            box = Box(*B)
+        elif arr is not None and arr.ndim == 2 and arr.shape[1] == 2:
+            box = Box(arr[:, 0], arr[:, 1])
+        else:
+            raise TypeError(f"{name} must be a Box, a (d, 2) array or a (lo, hi) pair")
+    if box.dim != d:
+        raise DimensionError(f"{name} has the wrong dimension; expected {d} instead of {box.dim}")
+    if not box.is_bounded():
+        raise UnboundedSetError(f"{name} must be bounded; got {box!r}")
+    return box
+
+
+class Model:
+    """Discrete-time model ``x+ = f(x, u, w)`` with state, input and disturbance boxes.
+
+    Parameters
+    ----------
+    x : casadi.SX, shape (n, 1)
+        State symbols.
+    u : casadi.SX, shape (m, 1)
+        Input symbols (``m = 0`` allowed: ``casadi.SX.sym("u", 0)``).
+    f : casadi.SX, shape (n, 1)
+        Successor state as an expression of ``x``, ``u`` and ``w`` only.
+    w : casadi.SX, shape (l, 1), optional
+        Uncertain parameters / disturbances. Requires ``W``.
+    X, U, W : Box or array_like (d, 2) or (lo, hi)
+        Bounded constraint boxes of x, u and the range of w.
+    name : str
+        Used in Function names and generated code.
+
+    MX symbols and expressions are accepted and converted to SX (``Function.expand``).
+
+    Raises
+    ------
+    FreeSymbolError
+        ``f`` depends on symbols other than ``x``, ``u``, ``w``.
+    DimensionError
+        Shapes of ``f`` or a box do not match.
+    ModelError
+        ``w`` without ``W`` (or ``W`` without ``w``), non-symbolic ``x``/``u``/``w``.
+    EmptySetError, InvalidBoundsError, UnboundedSetError
+        A box with ``lo > hi``, NaN or infinite bounds.
+
+    Examples
+    --------
+    >>> import casadi as ca, casadi_cmpc as cm
+    >>> x = ca.SX.sym("x", 2); u = ca.SX.sym("u")
+    >>> f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * u)
+    >>> model = cm.Model(x=x, u=u, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]))
+    >>> model.n, model.m, model.l
+    (2, 1, 0)
+    >>> model.is_linear
+    True
+    """
+
+    def __init__(self, x: Any, u: Any, f: Any, w: Any = None, X: Any = None, U: Any = None,
+                 W: Any = None, name: str = "model") -> None:
+        if u is None:
+            u = ca.SX.sym("u", 0) if not isinstance(x, ca.MX) else ca.MX.sym("u", 0)
+        x, u, w, f = _to_sx(x, u, w, f)
+        _check_symbol(x, "x")
+        _check_symbol(u, "u")
+        if w is not None:
+            _check_symbol(w, "w")
+            if w.numel() == 0:
+                w = None
+        if not isinstance(f, ca.SX):
+            try:
+                f = ca.SX(f)
+            except Exception as exc:
+                raise TypeError(f"f must be a casadi.SX expression; got {type(f).__name__}"
+                                ) from exc
+        n, m = x.numel(), u.numel()
+        if n == 0:
+            raise DimensionError("the state x must have at least one component")
+        if f.numel() != n or not (f.is_column() or f.is_row()):
+            raise DimensionError(
+                f"f must be a vector with as many elements as x; expected {n} instead of "
+                f"shape {f.shape}")
+        f = ca.reshape(ca.densify(f), n, 1)
+        if w is not None and W is None:
+            raise ModelError("w is given but its range W is missing; pass W=cm.Box(lo, hi)")
+        if w is None and W is not None:
+            raise ModelError("W is given but there is no disturbance symbol w")
+        if X is None:
+            raise ModelError("the state box X is required (e.g. X=cm.Box(lo, hi))")
+        if U is None:
+            if m > 0:
+                raise ModelError("the input box U is required (e.g. U=cm.Box(lo, hi))")
+            U = Box(np.zeros(0), np.zeros(0))
+        declared = [x, u] + ([w] if w is not None else [])
+        names = {}
+        for v, nm in zip(declared, _WRT, strict=False):
+            for i in range(v.numel()):
+                names[v[i].name()] = nm
+        # symbols of f not among the declared ones (compare by identity of the SX nodes)
+        sym_f = ca.symvar(f)
+        allowed = set()
+        for v in declared:
+            for i in range(v.numel()):
+                allowed.add(v[i].__hash__())
+        free = [s for s in sym_f if s.__hash__() not in allowed]
+        if free:
+            raise FreeSymbolError(
+                "f depends on symbols that are not declared as x, u or w: "
+                + ", ".join(str(s) for s in free)
+                + "; substitute numeric values for parameters or declare uncertain ones as w")
+        self.x, self.u, self.w, self.f = x, u, w, f
+        self.name = str(name)
+        self.X = _as_model_box(X, n, "X")
+        self.U = _as_model_box(U, m, "U")
+        self.W = _as_model_box(W, w.numel(), "W") if w is not None else None
+        self.law: ca.SX | None = None  # set by closed_loop
+        self.input_box: Box | None = None  # U of the open-loop model, set by closed_loop
+        self._cache: dict[Any, Any] = {}
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n(self) -> int:
+        """Number of states."""
+        return int(self.x.numel())
+
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return int(self.u.numel())
+
+    @property
+    def l(self) -> int:  # noqa: E743
+        """Number of disturbances (0 without w)."""
+        return 0 if self.w is None else int(self.w.numel())
+
+    @property
+    def _w_sym(self) -> ca.SX:
+        return self.w if self.w is not None else ca.SX.sym("w", 0)
+
+    @property
+    def W_box(self) -> Box:
+        """W, or a 0-dimensional box when the model has no disturbance."""
+        return self.W if self.W is not None else Box(np.zeros(0), np.zeros(0))
+
+    # -------------------------------------------------------------- functions
+    def _cached(self, key: Any, build: Callable[[], Any]) -> Any:
+        if key not in self._cache:
+            self._cache[key] = build()
+        return self._cache[key]
+
+    @property
+    def function(self) -> ca.Function:
+        """CasADi Function ``f(x, u, w) -> x_next`` (``w`` of size 0 without disturbance)."""
+        return self._cached("function", lambda: ca.Function(
+            f"{self.name}_f", [self.x, self.u, self._w_sym], [ca.cse(self.f)],
+            ["x", "u", "w"], ["x_next"]))
+
+    def jacobian_function(self, wrt: str) -> ca.Function:
+        """CasADi Function ``(x, u, w) -> df/d<wrt>`` (dense, shape (n, d_wrt))."""
+        wrt = _check_wrt(wrt)
+        sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
+
+        def build() -> ca.Function:
+            jac = ca.densify(ca.jacobian(self.f, sym))
+            return ca.Function(f"{self.name}_jac_{wrt}", [self.x, self.u, self._w_sym],
+                               [ca.cse(jac)], ["x", "u", "w"], [f"df_d{wrt}"])
+
+        return self._cached(("jacfun", wrt), build)
+
+    def step(self, x: Any, u: Any = None, w: Any = None) -> np.ndarray:
+        """Numeric successor state(s), evaluated by CasADi.
+
+        Parameters
+        ----------
+        x : array_like, shape (N, n) or (n,)
+        u : array_like, shape (N, m) or (m,); broadcast against x. Optional when m = 0.
+        w : array_like, shape (N, l) or (l,); required when the model has w.
+
+        Returns
+        -------
+        ndarray, shape (N, n) (or (n,) for a single unbatched state)
+        """
+        xs, batched = as_points(x, self.n, "x")
+        us = self._arg_points(u, self.m, "u")
+        ws = self._arg_points(w, self.l, "w")
+        n_b = max(xs.shape[0], us.shape[0], ws.shape[0])
+        for arr, nm in ((xs, "x"), (us, "u"), (ws, "w")):
+            if arr.shape[0] not in (1, n_b):
+                raise DimensionError(f"batch size of {nm} ({arr.shape[0]}) does not broadcast "
+                                     f"to {n_b}")
+        fun = self._cached(("map", n_b), lambda: self.function.map(n_b))
+        out = np.asarray(fun(_cols(xs, n_b), _cols(us, n_b), _cols(ws, n_b))).T
+        out = out.reshape(n_b, self.n)
+        batched = batched or n_b > 1
+        return out if batched else out[0]
+
+    def _arg_points(self, v: Any, d: int, name: str) -> np.ndarray:
+        if v is None:
+            if d > 0:
+                raise ModelError(f"{name} is required for this model (dimension {d})")
+            return np.zeros((1, 0))
+        return as_points(v, d, name)[0]
+
+    # -------------------------------------------------------------- inclusion
+    def inclusion(self, kind: str = "natural") -> Callable[..., np.ndarray]:
+        """Batched interval inclusion function of one step.
+
+        Parameters
+        ----------
+        kind : {"natural", "centered"}
+            See :func:`casadi_cmpc.interval.inclusion`.
+
+        Returns
+        -------
+        callable ``F(X, U=None, W=None) -> ndarray (N, n, 2)``
+            ``X``: boxes ``(N, n, 2)`` or ``(n, 2)`` or a Box; ``U``: ``(N, m, 2)`` (defaults
+            to the model's U); ``W``: ``(N, l, 2)`` (defaults to the model's W). Batch sizes of
+            1 broadcast. Every successor ``f(x, u, w)`` with x, u, w in the boxes lies inside.
+        """
+        kind = str(kind).lower()
+        F = self._cached(("inclusion", kind),
+                         lambda: InclusionFunction(self.function, kind))
+        return _ModelInclusion(self, F)
+
+    def jacobian_inclusion(self, wrt: str = "x",
+                           kind: str = "natural") -> Callable[..., np.ndarray]:
+        """Interval Jacobian of f with respect to ``x``, ``u`` or ``w`` over boxes.
+
+        Returns
+        -------
+        callable ``J(X, U=None, W=None) -> ndarray (N, n, d_wrt, 2)``
+            Interval matrices containing ``df/d<wrt>(x, u, w)`` for all x, u, w in the boxes
+            (used by zonotope evolution, thesis Thm 4.3/4.4).
+        """
+        wrt = _check_wrt(wrt)
+        F = self._cached(("jac_inclusion", wrt, kind),
+                         lambda: InclusionFunction(self.jacobian_function(wrt), kind))
+        d = {"x": self.n, "u": self.m, "w": self.l}[wrt]
+        n = self.n
+
+        def J(X: Any, U: Any = None, W: Any = None) -> np.ndarray:
+            out = _ModelInclusion(self, F)(X, U, W)  # (N, n*d, 2), column-major
+            return out.reshape(out.shape[0], d, n, 2).transpose(0, 2, 1, 3)
+
+        return J
+
+    # --------------------------------------------------------------- structure
+    def _jac(self, wrt: str) -> ca.SX:
+        sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
+        return self._cached(("jac_sx", wrt), lambda: ca.jacobian(self.f, sym))
+
+    def _all_syms(self) -> list[ca.SX]:
+        return [self.x, self.u] + ([self.w] if self.w is not None else [])
+
+    def _depends(self, e: ca.SX, syms: list[ca.SX]) -> bool:
+        return any(s.numel() > 0 and ca.depends_on(e, s) for s in syms)
+
+    @property
+    def is_affine_in_u(self) -> bool:
+        """True when f is affine in u (df/du does not depend on u)."""
+        return self.m == 0 or not ca.depends_on(self._jac("u"), self.u)
+
+    @property
+    def is_affine_in_w(self) -> bool:
+        """True when f is affine in w (df/dw does not depend on w); True without w."""
+        return self.w is None or not ca.depends_on(self._jac("w"), self.w)
+
+    @property
+    def is_linear(self) -> bool:
+        """True when f is affine in (x, u, w) jointly (all Jacobians constant)."""
+        return not any(self._depends(self._jac(k), self._all_syms())
+                       for k in ("x", "u", "w") if k != "w" or self.w is not None)
+
+    @property
+    def nonlinear_states(self) -> tuple[int, ...]:
+        """Indices j of the states that enter f nonlinearly (df/dx_j not constant).
+
+        The other states form the affine state part of thesis §6.2:
+        ``f = A x + g(x_NL, u, w)`` with ``A`` = :attr:`affine_state_matrix`.
+        """
+        J = self._jac("x")
+        syms = self._all_syms()
+        return tuple(j for j in range(self.n) if self._depends(J[:, j], syms))
+
+    @property
+    def linear_states(self) -> tuple[int, ...]:
+        """Indices of the states that enter f only linearly (complement of nonlinear_states)."""
+        nl = set(self.nonlinear_states)
+        return tuple(j for j in range(self.n) if j not in nl)
+
+    @property
+    def has_affine_state_part(self) -> bool:
+        """True when some, but not all, states enter only linearly (thesis §6.2)."""
+        return 0 < len(self.nonlinear_states) < self.n
+
+    @property
+    def affine_state_matrix(self) -> np.ndarray:
+        """A of shape (n, n): columns of the linear states (constant df/dx_j), zero elsewhere."""
+        A = np.zeros((self.n, self.n))
+        J = self._jac("x")
+        for j in self.linear_states:
+            A[:, j] = np.asarray(ca.DM(ca.evalf(J[:, j]))).reshape(-1)
+        return A
+
+    @property
+    def has_affine_control_part(self) -> bool:
+        """True when f = g(x, w) + B u with a constant B (thesis §6.3)."""
+        return self.m > 0 and not self._depends(self._jac("u"), self._all_syms())
+
+    @property
+    def input_matrix(self) -> np.ndarray:
+        """Constant B (n, m) of an affine control part; raises ModelError otherwise."""
+        if not self.has_affine_control_part:
+            raise ModelError(f"model '{self.name}' has no affine control part g(x, w) + B u")
+        return np.asarray(ca.DM(ca.evalf(self._jac("u")))).reshape(self.n, self.m)
+
+    def linear_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(A, B, E, c)`` with ``f = A x + B u + E w + c`` for a linear model.
+
+        Raises ModelError when the model is not linear.
+        """
+        if not self.is_linear:
+            raise ModelError(f"model '{self.name}' is not linear in (x, u, w)")
+
+        def const(e: ca.SX, rows: int, cols: int) -> np.ndarray:
+            return np.asarray(ca.DM(ca.evalf(e))).reshape(rows, cols) if cols else np.zeros(
+                (rows, 0))
+
+        A = const(self._jac("x"), self.n, self.n)
+        B = const(self._jac("u"), self.n, self.m)
+        E = const(self._jac("w"), self.n, self.l) if self.w is not None else np.zeros((self.n, 0))
+        zero = [ca.DM.zeros(s.shape) for s in self._all_syms()]
+        c = np.asarray(ca.DM(ca.evalf(ca.substitute([self.f], self._all_syms(), zero)[0])))
+        return A, B, E, c.reshape(self.n)
+
+    # ------------------------------------------------------------- closed loop
+    def closed_loop(self, law: Any, name: str | None = None) -> Model:
+        """The autonomous model ``x+ = f(x, law(x), w)``.
+
+        Parameters
+        ----------
+        law : array_like (m, n) or casadi.SX (m, 1)
+            A gain matrix ``K`` (``u = K x``) or an expression of ``x`` (and optionally ``w``
+            for measured disturbances is *not* allowed: only ``x``).
+
+        Returns
+        -------
+        Model
+            With ``m = 0``; ``.law`` holds the law's expression in x and ``.input_box`` the
+            open-loop U, so that input constraints ``law(X) ⊆ U`` can be checked.
+        """
+        if self.m == 0:
+            raise ModelError(f"model '{self.name}' has no input to close the loop on")
+        if isinstance(law, (ca.SX, ca.MX)):
+            if isinstance(law, ca.MX):
+                law = ca.Function("law", [ca.MX.sym("x", self.n)], [law])
+                raise TypeError("give the law as casadi.SX in the model's x (or a gain matrix)")
+            if law.numel() != self.m:
+                raise DimensionError(
+                    f"the law must have {self.m} elements (one per input); got shape {law.shape}")
+            law = ca.reshape(law, self.m, 1)
+            allowed = {self.x[i].__hash__() for i in range(self.n)}
+            free = [s for s in ca.symvar(law) if s.__hash__() not in allowed]
+            if free:
+                raise FreeSymbolError("the law may depend on the model's x only; it depends on "
+                                      + ", ".join(str(s) for s in free))
+            law_sx = law
+        else:
+            K = np.atleast_2d(np.asarray(law, dtype=float))
+            if K.shape != (self.m, self.n):
+                raise DimensionError(
+                    f"gain K must have shape (m, n) = ({self.m}, {self.n}); got {K.shape}")
+            law_sx = ca.mtimes(ca.DM(K), self.x)
+        f_cl = ca.substitute(self.f, self.u, law_sx)
+        cl = Model(x=self.x, u=ca.SX.sym("u", 0), f=f_cl, w=self.w, X=self.X, U=None,
+                   W=self.W, name=name or f"{self.name}_cl")
+        cl.law = law_sx
+        cl.input_box = self.U
+        return cl
+
+    def law_inclusion(self, kind: str = "natural") -> Callable[..., np.ndarray]:
+        """For a closed-loop model: interval enclosure of the law, ``(N, n, 2) -> (N, m, 2)``."""
+        if self.law is None:
+            raise ModelError("law_inclusion needs a closed-loop model (see closed_loop)")
+        fun = self._cached("law_fun", lambda: ca.Function(
+            f"{self.name}_law", [self.x], [self.law], ["x"], ["u"]))
+        F = self._cached(("law_inclusion", kind), lambda: InclusionFunction(fun, kind))
+        return lambda X: F(as_boxes(X, self.n, "X"))[0]
+
+    # ---------------------------------------------------------------- summary
+    def summary(self) -> str:
+        """A short multi-line description: sizes, boxes, detected structure."""
+        lines = [
+            f"Model '{self.name}': n = {self.n} states, m = {self.m} inputs, "
+            f"l = {self.l} disturbances",
+            f"  X = {self.X!r}",
+            f"  U = {self.U!r}" if self.m else "  U = (no input)",
+        ]
+        if self.W is not None:
+            lines.append(f"  W = {self.W!r}")
+        if self.law is not None:
+            lines.append(f"  closed loop with u = {self.law}")
+        lines.append(f"  linear: {self.is_linear}; affine in u: {self.is_affine_in_u}; "
+                     f"affine in w: {self.is_affine_in_w}")
+        lines.append(f"  nonlinear states: {list(self.nonlinear_states)}; affine control part:"
+                     f" {self.has_affine_control_part}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return f"Model('{self.name}', n={self.n}, m={self.m}, l={self.l})"
+
+    @classmethod
+    def from_ode(cls, x: Any, u: Any, rhs: Any, dt: float, method: str = "euler", w: Any = None,
+                 X: Any = None, U: Any = None, W: Any = None, name: str = "model",
+                 substeps: int = 1) -> Model:
+        """Discretise ``dx/dt = rhs(x, u, w)`` with a fixed step ``dt`` (time units of rhs).
+
+        Parameters
+        ----------
+        method : {"euler", "rk4"}
+            Explicit Euler or classical Runge-Kutta 4, with ``substeps`` steps of ``dt/substeps``
+            per sample (u and w held constant over the sample).
+        """
+        method = str(method).lower()
+        if method not in ("euler", "rk4"):
+            raise ValueError(f"unknown method '{method}'; valid methods: euler, rk4")
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt must be a positive finite number; got {dt}")
+        if u is None:
+            u = ca.SX.sym("u", 0)
+        x, u, w, rhs = _to_sx(x, u, w, rhs)
+        if not isinstance(rhs, ca.SX) or rhs.numel() != x.numel():
+            raise DimensionError(f"rhs must have as many elements as x ({x.numel()})")
+        rhs = ca.reshape(rhs, x.numel(), 1)
+        args = [x, u] + ([w] if w is not None else [])
+        g = ca.Function("rhs", args, [rhs])
+        h = float(dt) / int(substeps)
+        xk = x
+        extra = [w] if w is not None else []
+        for _ in range(int(substeps)):
+            if method == "euler":
+                xk = xk + h * g(xk, u, *extra)
+            else:
+                k1 = g(xk, u, *extra)
+                k2 = g(xk + h / 2 * k1, u, *extra)
+                k3 = g(xk + h / 2 * k2, u, *extra)
+                k4 = g(xk + h * k3, u, *extra)
+                xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return cls(x=x, u=u, f=xk, w=w, X=X, U=U, W=W, name=name)
+
+
+def _check_wrt(wrt: str) -> str:
+    wrt = str(wrt).lower()
+    if wrt not in _WRT:
+        raise ValueError(f"unknown variable '{wrt}'; valid: x, u, w")
+    return wrt
+
+
+def _cols(a: np.ndarray, n_b: int) -> np.ndarray:
+    """(N or 1, d) -> (d, n_b) for a mapped CasADi call."""
+    return np.broadcast_to(a, (n_b, a.shape[1])).T
+
+
+class _ModelInclusion:
+    """``F(X, U=None, W=None) -> (N, n, 2)`` wrapper around an InclusionFunction of f."""
+
+    def __init__(self, model: Model, F: InclusionFunction) -> None:
+        self.model = model
+        self.F = F
+        self.kind = F.kind
+
+    def __call__(self, X: Any, U: Any = None, W: Any = None) -> np.ndarray:
+        m = self.model
+        if U is None:
+            U = m.U.as_array()
+        if W is None:
+            W = m.W_box.as_array()
+        elif m.w is None:
+            raise ModelError(f"model '{m.name}' has no disturbance; do not pass W")
+        Xb = as_boxes(X, m.n, "X")
+        Ub = as_boxes(U, m.m, "U")
+        Wb = as_boxes(W, m.l, "W")
+        return self.F(Xb, Ub, Wb)[0]
+
+    def __repr__(self) -> str:
+        return f"<{self.kind} inclusion of model '{self.model.name}'>"

@@ -1,0 +1,138 @@
+"""Axis-aligned boxes (interval vectors)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_points
+from ..exceptions import DimensionError, EmptySetError, InvalidBoundsError
+
+__all__ = ["Box"]
+
+
+class Box:
+    """An axis-aligned box ``[lo_1, hi_1] x ... x [lo_d, hi_d]``.
+
+    Parameters
+    ----------
+    lo, hi : array_like, shape (d,)
+        Lower and upper bounds. Infinite bounds are allowed (e.g. a target set
+        ``[0, inf)``); NaN bounds and ``lo > hi`` are refused.
+
+    Examples
+    --------
+    >>> import casadi_cmpc as cm
+    >>> B = cm.Box([-1, 0], [1, 2])
+    >>> B.as_array().shape
+    (2, 2)
+    >>> B.mid
+    array([0., 1.])
+    """
+
+    __slots__ = ("lo", "hi")
+
+    def __init__(self, lo: Any, hi: Any) -> None:
+        lo_a = np.atleast_1d(np.asarray(lo, dtype=float)).copy()
+        hi_a = np.atleast_1d(np.asarray(hi, dtype=float)).copy()
+        if lo_a.ndim != 1 or hi_a.ndim != 1:
+            raise DimensionError(
+                f"Box bounds must be 1-D; got lo shape {lo_a.shape}, hi shape {hi_a.shape}")
+        if lo_a.shape != hi_a.shape:
+            raise DimensionError(
+                f"Box bounds differ in length: lo has {lo_a.size}, hi has {hi_a.size}")
+        if np.isnan(lo_a).any() or np.isnan(hi_a).any():
+            raise InvalidBoundsError("Box bounds contain NaN")
+        bad = np.flatnonzero(lo_a > hi_a)
+        if bad.size:
+            i = int(bad[0])
+            raise EmptySetError(
+                f"Box is empty: lo[{i}] = {lo_a[i]} > hi[{i}] = {hi_a[i]}; "
+                "give bounds with lo <= hi")
+        lo_a.setflags(write=False)
+        hi_a.setflags(write=False)
+        self.lo = lo_a
+        self.hi = hi_a
+
+    @classmethod
+    def from_array(cls, arr: Any) -> Box:
+        """Build a box from a ``(d, 2)`` array of ``[lo, hi]`` rows."""
+        a = np.asarray(arr, dtype=float)
+        if a.ndim != 2 or a.shape[1] != 2:
+            raise DimensionError(f"expected an array of shape (d, 2); got {a.shape}")
+        return cls(a[:, 0], a[:, 1])
+
+    @property
+    def dim(self) -> int:
+        """Dimension d."""
+        return int(self.lo.size)
+
+    def __len__(self) -> int:
+        return self.dim
+
+    def as_array(self) -> np.ndarray:
+        """Bounds as an array of shape ``(d, 2)``."""
+        return np.stack([self.lo, self.hi], axis=-1)
+
+    @property
+    def mid(self) -> np.ndarray:
+        """Midpoint, shape (d,)."""
+        return 0.5 * (self.lo + self.hi)
+
+    @property
+    def rad(self) -> np.ndarray:
+        """Radius (half width), shape (d,)."""
+        return 0.5 * (self.hi - self.lo)
+
+    @property
+    def diam(self) -> np.ndarray:
+        """Width, shape (d,)."""
+        return self.hi - self.lo
+
+    def volume(self) -> float:
+        """Product of the widths."""
+        return float(np.prod(self.hi - self.lo))
+
+    def is_bounded(self) -> bool:
+        """True when every bound is finite."""
+        return bool(np.isfinite(self.lo).all() and np.isfinite(self.hi).all())
+
+    def contains(self, points: Any) -> np.ndarray | bool:
+        """Membership of points.
+
+        Parameters
+        ----------
+        points : array_like, shape (N, d) or (d,)
+
+        Returns
+        -------
+        bool or ndarray of bool, shape (N,)
+        """
+        p, batched = as_points(points, self.dim, name="points")
+        inside = ((p >= self.lo) & (p <= self.hi)).all(axis=1)
+        return inside if batched else bool(inside[0])
+
+    def sample(self, n: int, seed: int | np.random.Generator | None = None) -> np.ndarray:
+        """Uniform random points of the box, shape (n, d). The box must be bounded."""
+        if not self.is_bounded():
+            raise ValueError("cannot sample an unbounded box")
+        rng = np.random.default_rng(seed)
+        return self.lo + (self.hi - self.lo) * rng.random((n, self.dim))
+
+    def vertices(self) -> np.ndarray:
+        """The 2**d corners, shape (2**d, d)."""
+        d = self.dim
+        bits = (np.arange(2 ** d)[:, None] >> np.arange(d)) & 1
+        return np.where(bits.astype(bool), self.hi, self.lo)
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, Box) and np.array_equal(self.lo, other.lo)
+                and np.array_equal(self.hi, other.hi))
+
+    def __hash__(self) -> int:
+        return hash((self.lo.tobytes(), self.hi.tobytes()))
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(self.lo, self.hi, strict=True))
+        return f"Box({parts})"
