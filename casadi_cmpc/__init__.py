@@ -26,4 +26,4 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'casadi_cmpc' has no attribute '{name}'")
 
 
-__all__ = ["interval", "models"]  # noqa: F405 + list(_exc_all) + list(_model_all) + list(_sets_all)
+__all__ = ["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)

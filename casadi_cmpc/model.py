@@ -49,6 +49,7 @@ def _to_sx(x: Any, u: Any, w: Any, f: Any) -> tuple[ca.SX, ca.SX, ca.SX | None, 
         raise TypeError("x, u, w and f must all be casadi.SX (or all casadi.MX, which is "
                         "converted to SX); got a mixture")
     ins = [x, u] + ([w] if w is not None else [])
+    _check_free(f, ins, "f")
     try:
         fun = ca.Function("f_mx", ins, [f]).expand()
     except Exception as exc:
@@ -60,6 +61,22 @@ def _to_sx(x: Any, u: Any, w: Any, f: Any) -> tuple[ca.SX, ca.SX, ca.SX | None, 
     ws = ca.SX.sym("w", w.shape[0]) if w is not None else None
     fs = fun(*([xs, us] + ([ws] if ws is not None else [])))
     return xs, us, ws, fs
+
+
+def _check_free(expr: Any, declared: list[Any], what: str) -> None:
+    """Raise FreeSymbolError when expr depends on symbols outside ``declared``."""
+    allowed = set()
+    for v in declared:
+        if v is None:
+            continue
+        for s in ca.symvar(v):
+            allowed.add(s.__hash__())
+    free = [s for s in ca.symvar(expr) if s.__hash__() not in allowed]
+    if free:
+        raise FreeSymbolError(
+            f"{what} depends on symbols that are not declared as x, u or w: "
+            + ", ".join(str(s) for s in free)
+            + "; substitute numeric values for parameters or declare uncertain ones as w")
 
 
 def _as_model_box(B: Any, d: int, name: str) -> Box:
@@ -158,23 +175,7 @@ class Model:
             if m > 0:
                 raise ModelError("the input box U is required (e.g. U=cm.Box(lo, hi))")
             U = Box(np.zeros(0), np.zeros(0))
-        declared = [x, u] + ([w] if w is not None else [])
-        names = {}
-        for v, nm in zip(declared, _WRT, strict=False):
-            for i in range(v.numel()):
-                names[v[i].name()] = nm
-        # symbols of f not among the declared ones (compare by identity of the SX nodes)
-        sym_f = ca.symvar(f)
-        allowed = set()
-        for v in declared:
-            for i in range(v.numel()):
-                allowed.add(v[i].__hash__())
-        free = [s for s in sym_f if s.__hash__() not in allowed]
-        if free:
-            raise FreeSymbolError(
-                "f depends on symbols that are not declared as x, u or w: "
-                + ", ".join(str(s) for s in free)
-                + "; substitute numeric values for parameters or declare uncertain ones as w")
+        _check_free(f, [x, u, w], "f")
         self.x, self.u, self.w, self.f = x, u, w, f
         self.name = str(name)
         self.X = _as_model_box(X, n, "X")
@@ -418,10 +419,9 @@ class Model:
         """
         if self.m == 0:
             raise ModelError(f"model '{self.name}' has no input to close the loop on")
-        if isinstance(law, (ca.SX, ca.MX)):
-            if isinstance(law, ca.MX):
-                law = ca.Function("law", [ca.MX.sym("x", self.n)], [law])
-                raise TypeError("give the law as casadi.SX in the model's x (or a gain matrix)")
+        if isinstance(law, ca.MX):
+            raise TypeError("give the law as casadi.SX in the model's x (or a gain matrix)")
+        if isinstance(law, ca.SX):
             if law.numel() != self.m:
                 raise DimensionError(
                     f"the law must have {self.m} elements (one per input); got shape {law.shape}")
@@ -493,11 +493,22 @@ class Model:
             raise ValueError(f"unknown method '{method}'; valid methods: euler, rk4")
         if not np.isfinite(dt) or dt <= 0:
             raise ValueError(f"dt must be a positive finite number; got {dt}")
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be a positive integer; got {substeps}")
         if u is None:
             u = ca.SX.sym("u", 0)
         x, u, w, rhs = _to_sx(x, u, w, rhs)
-        if not isinstance(rhs, ca.SX) or rhs.numel() != x.numel():
-            raise DimensionError(f"rhs must have as many elements as x ({x.numel()})")
+        if not isinstance(rhs, ca.SX):
+            try:
+                rhs = ca.SX(rhs)
+            except Exception as exc:
+                raise TypeError(f"rhs must be a casadi.SX expression; got {type(rhs).__name__}"
+                                ) from exc
+        if rhs.numel() != x.numel():
+            raise DimensionError(
+                f"rhs must have as many elements as x; expected {x.numel()} instead of "
+                f"{rhs.numel()}")
+        _check_free(rhs, [x, u, w], "rhs")
         rhs = ca.reshape(rhs, x.numel(), 1)
         args = [x, u] + ([w] if w is not None else [])
         g = ca.Function("rhs", args, [rhs])

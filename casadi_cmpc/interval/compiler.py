@@ -10,6 +10,7 @@ specialised (e.g. ``x * c`` costs two multiplications instead of four).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -17,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from .._validate import as_boxes
-from ..exceptions import DimensionError, UnsupportedOperationError
+from ..exceptions import CmpcWarning, DimensionError, UnsupportedOperationError
 from . import arith
 
 __all__ = ["inclusion", "InclusionFunction"]
@@ -43,6 +44,17 @@ _BINARY = {
     ca.OP_COPYSIGN: "copysign", ca.OP_FMOD: "fmod", ca.OP_REMAINDER: "remainder",
     ca.OP_HYPOT: "hypot",
 }
+
+# Operations through which f may jump: the mean-value (centered) form is not valid for them.
+_DISCONTINUOUS = {
+    ca.OP_FLOOR, ca.OP_CEIL, ca.OP_SIGN, ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT,
+    ca.OP_AND, ca.OP_OR, ca.OP_IF_ELSE_ZERO, ca.OP_FMOD, ca.OP_REMAINDER, ca.OP_COPYSIGN,
+}
+
+
+def _discontinuous_ops(fun: ca.Function) -> list[str]:
+    ops = {fun.instruction_id(k) for k in range(fun.n_instructions())}
+    return sorted(_op_name(op) for op in ops & _DISCONTINUOUS)
 
 
 def _op_name(op: int) -> str:
@@ -212,6 +224,11 @@ class InclusionFunction:
         The SX Function (expanded if an MX Function was given).
     kind : str
         ``"natural"`` or ``"centered"``.
+    centered_fallback : bool
+        True when ``kind == "centered"`` but the Function contains operations through which it
+        may be discontinuous (floor, ceil, sign, comparisons, if_else, fmod, remainder,
+        copysign): the mean-value form would be unsound there, so the natural inclusion is
+        used (a :class:`~casadi_cmpc.CmpcWarning` says so).
     source : str
         The generated numpy source (natural evaluator), for inspection.
     """
@@ -230,9 +247,17 @@ class InclusionFunction:
         self._out_pos = [np.asarray(fun.sparsity_out(i).find(), dtype=np.intp)
                          for i in range(self.n_out)]
         self._eval, self.source = _compile(fun)
-        self._jac: InclusionFunction | None = None
+        self.centered_fallback = False
         if kind == "centered":
-            self._build_centered()
+            bad = _discontinuous_ops(fun)
+            if bad:
+                self.centered_fallback = True
+                warnings.warn(
+                    f"'{fun.name()}' contains operations through which it may jump "
+                    f"({', '.join(bad)}); the centered (mean-value) form is not valid for it, "
+                    "so its natural inclusion is used instead", CmpcWarning, stacklevel=3)
+            else:
+                self._build_centered()
 
     # ---------------------------------------------------------------- natural
     def _inputs(self, args: Sequence[Any]) -> tuple[list[np.ndarray], int]:
@@ -249,11 +274,16 @@ class InclusionFunction:
                 f"{[b.shape[0] for b in boxes]}")
         return boxes, n
 
-    def _natural(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
+    def _raw(self, evaluator: Callable[..., None], boxes: Sequence[np.ndarray],
+             n_outs: Sequence[int]) -> list[list[Any]]:
+        """Run a generated evaluator; per output, a list of (lo, hi) per nonzero."""
         il = [np.ascontiguousarray(b[..., 0].T) for b in boxes]
         ih = [np.ascontiguousarray(b[..., 1].T) for b in boxes]
-        o: list[list[Any]] = [[None] * len(p) for p in self._out_pos]
-        self._eval(il, ih, o)
+        o: list[list[Any]] = [[None] * k for k in n_outs]
+        evaluator(il, ih, o)
+        return o
+
+    def _pack(self, o: list[list[Any]], n: int) -> list[np.ndarray]:
         outs = []
         for i, pos in enumerate(self._out_pos):
             out = np.zeros((n, self.size_out[i], 2))
@@ -264,57 +294,78 @@ class InclusionFunction:
             outs.append(out)
         return outs
 
+    def _natural(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
+        return self._pack(self._raw(self._eval, boxes, [len(p) for p in self._out_pos]), n)
+
     # --------------------------------------------------------------- centered
     def _build_centered(self) -> None:
+        """One SX Function G(z_mid..., z_box...) -> [f(z_mid)..., J(z_box), f(z_box)...].
+
+        Common subexpressions of f and its Jacobian over the box are shared (casadi.cse).
+        """
         f = self.fun
-        syms = [ca.SX.sym(f"z{i}", f.sparsity_in(i)) for i in range(self.n_in)]
-        z = ca.vertcat(*[ca.vec(s) for s in syms])
-        outs = f(*syms)
-        if not isinstance(outs, (list, tuple)):
-            outs = [outs]
-        y = ca.vertcat(*[ca.vec(ca.densify(o)) for o in outs])
-        jac = ca.Function(f"{f.name()}_jac", syms, [ca.jacobian(y, z)])
-        self._jac = InclusionFunction(jac, "natural")
-        self._nz = int(z.numel())
-        self._ny = int(y.numel())
+        zm = [ca.SX.sym(f"m{i}", f.sparsity_in(i)) for i in range(self.n_in)]
+        zb = [ca.SX.sym(f"z{i}", f.sparsity_in(i)) for i in range(self.n_in)]
+        z = ca.vertcat(*[ca.vec(s) for s in zb])
+        outs_m = f.call(zm)
+        outs_b = f.call(zb)
+        y = ca.vertcat(*[ca.vec(o) for o in outs_b])
+        jac = ca.jacobian(y, z)
+        exprs = ca.cse(list(outs_m) + [jac] + list(outs_b))
+        g = ca.Function(f"{f.name()}_centered", zm + zb, exprs)
+        self._g_eval, self._g_source = _compile(g)
+        self._g_nnz = [g.nnz_out(i) for i in range(g.n_out())]
+        rows, cols = jac.sparsity().get_triplet()
+        # row offsets of each output inside y, and nonzero rows of each output
+        self._jac_rows = np.asarray(rows, dtype=np.intp)
+        self._jac_cols = np.asarray(cols, dtype=np.intp)
+        self._y_nz: list[list[int]] = []  # per output: the row of y of each of its nonzeros
+        off = 0
+        for i in range(self.n_out):
+            sp = f.sparsity_out(i)
+            self._y_nz.append([off + int(k) for k in sp.find()])
+            off += sp.numel()
 
     def _centered(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
-        assert self._jac is not None
         mids = []
+        rads = []
         for b in boxes:
-            m = np.clip(0.5 * b[..., 0] + 0.5 * b[..., 1], b[..., 0], b[..., 1])
+            lo, hi = b[..., 0], b[..., 1]
+            with np.errstate(all="ignore"):
+                m = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+                r = arith.up(np.maximum(m - lo, hi - m))
             mids.append(np.stack([m, m], axis=-1))
-        fm = self._natural(mids, n)
-        nat = self._natural(boxes, n)
-        jac = self._jac._natural(boxes, n)[0]  # (N, ny*nz, 2), column-major
-        jl = jac[..., 0].reshape(n, self._nz, self._ny).transpose(0, 2, 1)
-        jh = jac[..., 1].reshape(n, self._nz, self._ny).transpose(0, 2, 1)
-        dzl = np.concatenate(
-            [np.broadcast_to(b[..., 0] - m[..., 0], (n, b.shape[1]))
-             for b, m in zip(boxes, mids, strict=True)], axis=1)
-        dzh = np.concatenate(
-            [np.broadcast_to(b[..., 1] - m[..., 0], (n, b.shape[1]))
-             for b, m in zip(boxes, mids, strict=True)], axis=1)
-        dzl, dzh = arith.dn(dzl), arith.up(dzh)
-        pl, ph = arith.mul(jl, jh, dzl[:, None, :], dzh[:, None, :])  # (N, ny, nz)
-        sl, sh = _sum_interval(pl, ph, axis=2)
-        results = []
-        start = 0
-        for i in range(self.n_out):
-            d = self.size_out[i]
-            cl, ch = arith.add(fm[i][..., 0], fm[i][..., 1],
-                               sl[:, start:start + d], sh[:, start:start + d])
-            start += d
-            lo = np.maximum(cl, nat[i][..., 0])
-            hi = np.minimum(ch, nat[i][..., 1])
-            out = np.stack([lo, hi], axis=-1)
-            _sanitize(out)
-            results.append(out)
-        return results
+            rads.append(np.ascontiguousarray(r.T))  # (d_i, N_i)
+        rad = [row for r in rads for row in r]  # one (N_i,) array per joint coordinate
+        o = self._raw(self._g_eval, list(mids) + list(boxes), self._g_nnz)
+        k = self.n_out
+        fm, jac, fb = o[:k], o[k], o[k + 1:]
+        # S_r = sum_j mag(J_rj) * rad_j, rounded up (J (Z - m) is inside [-S, S])
+        spread: dict[int, Any] = {}
+        for t, (jl, jh) in enumerate(jac):
+            with np.errstate(all="ignore"):
+                term = arith.upm(np.maximum(-jl, jh) * rad[self._jac_cols[t]])
+            r = int(self._jac_rows[t])
+            spread[r] = term if r not in spread else arith.up(spread[r] + term)
+        res: list[list[Any]] = []
+        for i in range(k):
+            col = []
+            for j, (ml, mh) in enumerate(fm[i]):
+                bl, bh = fb[i][j]
+                S = spread.get(self._y_nz[i][j])
+                if S is None:
+                    col.append((bl, bh))
+                    continue
+                with np.errstate(all="ignore"):
+                    lo = np.maximum(arith.dn(ml - S), bl)
+                    hi = np.minimum(arith.up(mh + S), bh)
+                col.append((lo, hi))
+            res.append(col)
+        return self._pack(res, n)
 
     def __call__(self, *args: Any) -> list[np.ndarray]:
         boxes, n = self._inputs(args)
-        if self.kind == "natural":
+        if self.kind == "natural" or self.centered_fallback:
             return self._natural(boxes, n)
         return self._centered(boxes, n)
 
@@ -329,21 +380,6 @@ def _sanitize(out: np.ndarray) -> None:
     if nan.any():
         out[..., 0][nan[..., 0]] = -np.inf
         out[..., 1][nan[..., 1]] = np.inf
-
-
-def _sum_interval(lo: np.ndarray, hi: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """Outward-rounded sum of interval terms along ``axis``.
-
-    Uses the floating-point summation error bound |fl(sum) - sum| <= (k-1) u sum|x_i|,
-    widened to k * 2**-52 * sum|x_i| (k terms).
-    """
-    k = lo.shape[axis]
-    with np.errstate(all="ignore"):
-        sl = np.sum(lo, axis=axis)
-        sh = np.sum(hi, axis=axis)
-        el = np.sum(np.abs(lo), axis=axis) * (k * arith.U)
-        eh = np.sum(np.abs(hi), axis=axis) * (k * arith.U)
-        return arith.dn(sl - el), arith.up(sh + eh)
 
 
 def _compile(fun: ca.Function) -> tuple[Callable[..., None], str]:

@@ -134,5 +134,6 @@ class Box:
         return hash((self.lo.tobytes(), self.hi.tobytes()))
 
     def __repr__(self) -> str:
-        parts = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(self.lo, self.hi, strict=True))
-        return f"Box({parts})"
+        lo = ", ".join(f"{a:.6g}" for a in self.lo)
+        hi = ", ".join(f"{b:.6g}" for b in self.hi)
+        return f"Box([{lo}], [{hi}])"
