@@ -334,6 +334,11 @@ class Model:
         return self.w is None or not ca.depends_on(self._jac("w"), self.w)
 
     @property
+    def is_additive_in_w(self) -> bool:
+        """True when w enters additively, f = g(x, u) + E w with a constant E; True without w."""
+        return self.w is None or not self._depends(self._jac("w"), self._all_syms())
+
+    @property
     def is_linear(self) -> bool:
         """True when f is affine in (x, u, w) jointly (all Jacobians constant)."""
         return not any(self._depends(self._jac(k), self._all_syms())
@@ -468,7 +473,7 @@ class Model:
         if self.law is not None:
             lines.append(f"  closed loop with u = {self.law}")
         lines.append(f"  linear: {self.is_linear}; affine in u: {self.is_affine_in_u}; "
-                     f"affine in w: {self.is_affine_in_w}")
+                     f"affine in w: {self.is_affine_in_w}; additive w: {self.is_additive_in_w}")
         lines.append(f"  nonlinear states: {list(self.nonlinear_states)}; affine control part:"
                      f" {self.has_affine_control_part}")
         return "\n".join(lines)

@@ -1,0 +1,95 @@
+"""E11 — Khalil (2002) system with an affine state part (thesis §6.2.5, (6.14)).
+
+::
+
+    x1+ = x1 + 0.1 x1^2 - 0.1 u x1^3 + 0.1 x2
+    x2+ = x2 + 0.1 u + w,          |u| <= 3,  |x|_inf <= 1,  w in [-0.01, 0.01].
+
+Only x1 enters nonlinearly, so ``f = A x + g(x1, u, w)`` with ``A = [[0, 0.1], [0, 1]]``
+(columns of the linear states) and only x1 is bisected (Alg 6.4).
+
+Choices (the thesis shows its terminal polytope only in Fig 6.6):
+
+* local law ``u = K x``, ``K = [-5.8909, -7.1188]``: discrete LQR of the linearisation at
+  the origin (``A0 = [[1, 0.1], [0, 1]]``, ``B0 = [[0], [0.1]]``) with ``Q = I``,
+  ``R = 0.01``, rounded to 4 decimals; closed-loop eigenvalues 0.904 and 0.384;
+* terminal polytope ``T = {x : |T_V x|_inf <= 1}`` (low complexity, four facets) with the
+  rows of ``T_V`` along the left eigenvectors of ``A0 + B0 K``, scaled so that the worst
+  case of the successor of every facet under ``u = K x``, with the nonlinear terms bounded
+  over T and ``w`` at its extremes, is at most 0.951 (robust contraction of the facets by
+  about 5 %). On T, ``|K x| <= 1.30`` and ``|x1| <= 0.193``, ``|x2| <= 0.342``.
+
+This robust invariance was only checked numerically (floating-point bound and sampling);
+it is **not certified** here.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..model import Model
+from ..sets.box import Box
+from ..sets.polytope import Polytope
+from . import Example
+
+U_MAX = 3.0  # |u| <= 3, §6.2.5
+X_MAX = 1.0  # |x|_inf <= 1, §6.2.5
+W_MAX = 0.01  # w in [-0.01, 0.01], §6.2.5
+X0S = np.array([[-0.5, -0.8]])  # Fig 6.9
+# Affine state part of (6.14): columns of the linear states (x2), zero for x1
+A_AFFINE = np.array([[0.0, 0.1], [0.0, 1.0]])
+
+# Choices (not in the thesis), see the module docstring
+LQR_Q = np.eye(2)
+LQR_R = np.array([[0.01]])
+K_LOCAL = np.array([[-5.8909, -7.1188]])
+T_V = np.array([[7.307, 1.186], [6.073, 6.353]])  # terminal set |T_V x|_inf <= 1
+
+
+def terminal_set() -> Polytope:
+    """The chosen terminal polytope ``[T_V; -T_V] x <= 1``."""
+    return Polytope(np.vstack([T_V, -T_V]), np.ones(4))
+
+
+def build() -> Example:
+    """Build E11."""
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    w = ca.SX.sym("w")
+    f = ca.vertcat(
+        x[0] + 0.1 * x[0] ** 2 - 0.1 * u * x[0] ** 3 + 0.1 * x[1],
+        x[1] + 0.1 * u + w,
+    )
+    model = Model(x=x, u=u, f=f, w=w, X=Box([-X_MAX, -X_MAX], [X_MAX, X_MAX]),
+                  U=Box([-U_MAX], [U_MAX]), W=Box([-W_MAX], [W_MAX]),
+                  name="khalil_affine_state")
+    return Example(
+        name="khalil_affine_state",
+        model=model,
+        terminal=terminal_set(),
+        local_law=K_LOCAL.copy(),
+        x0s=X0S.copy(),
+        info={
+            "example": "E11",
+            "section": "6.2.5",
+            "equation": "(6.14); Alg 6.4, 6.5, 6.6",
+            "figures": ["6.6", "6.7", "6.8", "6.9"],
+            "affine_state_matrix": A_AFFINE.copy(),
+            "nonlinear_states": (0,),
+            "expected_converged_at": 39,  # P39 = P40
+            "unspecified": ["terminal polytope (only drawn in Fig 6.6)", "local law",
+                            "bisection tolerance eps", "weights Q, R of (6.12)"],
+            "choices": {
+                "local_law": "discrete LQR of the linearisation at 0, Q = I, R = 0.01, "
+                             "rounded to 4 decimals",
+                "lqr_Q": LQR_Q.copy(),
+                "lqr_R": LQR_R.copy(),
+                "terminal": "low-complexity polytope |T_V x|_inf <= 1 along the left "
+                            "eigenvectors of the linearised closed loop",
+                "T_V": T_V.copy(),
+                "terminal_status": "checked numerically (worst-case bound of the nonlinear "
+                                   "terms, sampling); not certified",
+            },
+        },
+    )

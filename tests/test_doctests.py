@@ -1,0 +1,21 @@
+"""The ``>>>`` examples in the public docstrings are run and must hold."""
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = [
+    "casadi_cmpc.sets.box",
+    "casadi_cmpc.model",
+    "casadi_cmpc.interval.compiler",
+    "casadi_cmpc.interval.ops",
+]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    mod = importlib.import_module(name)
+    result = doctest.testmod(mod, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0, f"{name} has no examples"
+    assert result.failed == 0
