@@ -6,13 +6,14 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points
+from .._validate import as_boxes, as_points
 from ..exceptions import DimensionError, EmptySetError, InvalidBoundsError
+from .base import SetBase
 
 __all__ = ["Box"]
 
 
-class Box:
+class Box(SetBase):
     """An axis-aligned box ``[lo_1, hi_1] x ... x [lo_d, hi_d]``.
 
     Parameters
@@ -31,7 +32,6 @@ class Box:
     array([0., 1.])
     """
 
-    __slots__ = ("lo", "hi")
 
     def __init__(self, lo: Any, hi: Any) -> None:
         lo_a = np.atleast_1d(np.asarray(lo, dtype=float)).copy()
@@ -125,6 +125,59 @@ class Box:
         d = self.dim
         bits = (np.arange(2 ** d)[:, None] >> np.arange(d)) & 1
         return np.where(bits.astype(bool), self.hi, self.lo)
+
+    # ------------------------------------------------------------- protocol
+    def is_empty(self) -> bool:
+        """Always False: an empty box cannot be constructed."""
+        return False
+
+    def contains_box(self, boxes: Any) -> np.ndarray:
+        """(N, d, 2) boxes -> (N,) bool: each box lies inside this box (exact test)."""
+        b = as_boxes(boxes, self.dim, "boxes")
+        return ((b[..., 0] >= self.lo) & (b[..., 1] <= self.hi)).all(axis=1)
+
+    def intersects_box(self, boxes: Any) -> np.ndarray:
+        """(N, d, 2) boxes -> (N,) bool: each box meets this box (exact test)."""
+        b = as_boxes(boxes, self.dim, "boxes")
+        return ((b[..., 0] <= self.hi) & (b[..., 1] >= self.lo)).all(axis=1)
+
+    def support(self, directions: Any) -> np.ndarray | float:
+        """Support function ``sum_i max(d_i lo_i, d_i hi_i)``; (k, d) -> (k,), (d,) -> float."""
+        D = np.asarray(directions, dtype=float)
+        single = D.ndim == 1
+        D = np.atleast_2d(D)
+        if D.shape[1] != self.dim:
+            raise DimensionError(f"directions must have {self.dim} columns; got {D.shape[1]}")
+        with np.errstate(invalid="ignore"):
+            a = D * self.lo
+            b = D * self.hi
+        val = np.where(D == 0, 0.0, np.maximum(a, b)).sum(axis=1)
+        return float(val[0]) if single else val
+
+    def bounding_box(self) -> Box:
+        """The box itself."""
+        return self
+
+    def is_subset(self, other: Box) -> bool:
+        """True when this box lies inside ``other``."""
+        return bool(np.all(self.lo >= other.lo) and np.all(self.hi <= other.hi))
+
+    def __and__(self, other: Box) -> Box | None:
+        """Intersection, or None when empty."""
+        lo = np.maximum(self.lo, other.lo)
+        hi = np.minimum(self.hi, other.hi)
+        return None if np.any(lo > hi) else Box(lo, hi)
+
+    def __or__(self, other: Box) -> Box:
+        """Interval hull of the two boxes."""
+        return Box(np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi))
+
+    def _state(self) -> dict:
+        return {"lo": np.array(self.lo), "hi": np.array(self.hi)}
+
+    @classmethod
+    def _from_state(cls, state: dict) -> Box:
+        return cls(state["lo"], state["hi"])
 
     def __eq__(self, other: object) -> bool:
         return (isinstance(other, Box) and np.array_equal(self.lo, other.lo)

@@ -1,0 +1,3 @@
+"""paving (work in progress)."""
+
+__all__: list[str] = []

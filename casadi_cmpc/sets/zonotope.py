@@ -1,0 +1,3 @@
+"""zonotope (work in progress)."""
+
+__all__: list[str] = []
