@@ -8,6 +8,8 @@ Conventional aliases used throughout the documentation::
 """
 
 from . import interval  # noqa: F401
+from .control import *  # noqa: F401,F403
+from .control import __all__ as _control_all  # noqa: F401
 from .exceptions import *  # noqa: F401,F403
 from .exceptions import __all__ as _exc_all  # noqa: F401
 from .model import *  # noqa: F401,F403
@@ -26,4 +28,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'casadi_cmpc' has no attribute '{name}'")
 
 
-__all__ = ["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)
+__all__ = (["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)
+           + list(_control_all))

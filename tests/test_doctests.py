@@ -10,6 +10,9 @@ MODULES = [
     "casadi_cmpc.model",
     "casadi_cmpc.interval.compiler",
     "casadi_cmpc.interval.ops",
+    "casadi_cmpc.sets.polytope",
+    "casadi_cmpc.sets.paving",
+    "casadi_cmpc.sets.zonotope",
 ]
 
 

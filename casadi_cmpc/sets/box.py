@@ -164,12 +164,16 @@ class Box(SetBase):
 
     def __and__(self, other: Box) -> Box | None:
         """Intersection, or None when empty."""
+        if not isinstance(other, Box):
+            return NotImplemented
         lo = np.maximum(self.lo, other.lo)
         hi = np.minimum(self.hi, other.hi)
         return None if np.any(lo > hi) else Box(lo, hi)
 
     def __or__(self, other: Box) -> Box:
         """Interval hull of the two boxes."""
+        if not isinstance(other, Box):
+            return NotImplemented
         return Box(np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi))
 
     def _state(self) -> dict:
@@ -180,8 +184,9 @@ class Box(SetBase):
         return cls(state["lo"], state["hi"])
 
     def __eq__(self, other: object) -> bool:
-        return (isinstance(other, Box) and np.array_equal(self.lo, other.lo)
-                and np.array_equal(self.hi, other.hi))
+        if not isinstance(other, Box):
+            return NotImplemented
+        return bool(np.array_equal(self.lo, other.lo) and np.array_equal(self.hi, other.hi))
 
     def __hash__(self) -> int:
         return hash((self.lo.tobytes(), self.hi.tobytes()))

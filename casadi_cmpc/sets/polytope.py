@@ -1,19 +1,91 @@
-"""Polytopes in H-representation ``{x : A x <= b}`` and finite unions of them."""
+"""Polytopes in H-representation ``{x : A x <= b}`` and finite unions of them.
+
+Numerics
+--------
+* **Closed-form box tests are rounding-safe.** ``contains_box`` and the first stage of
+  ``intersects_box`` bound ``max/min_{x in box} a.x`` in closed form with an a-priori
+  bound on the floating-point error (:mod:`casadi_cmpc.sets._boxkernel`): a ``True`` of
+  ``Polytope.contains_box`` and a ``False`` of ``intersects_box`` are proofs.
+* **LP decisions use a tolerance.** Emptiness, boundedness, redundancy, projection,
+  subset tests and the exact "box inside a union" test solve LPs with HiGHS
+  (``scipy.optimize.linprog(method="highs")``, feasibility tolerances ``1e-10``) on the
+  rows scaled to unit Euclidean norm, and decide with the tolerance
+  ``tol = 1e-9 * max(1, max |b_i| / ||a_i||)`` (a distance in the units of ``x``).
+* **V/H conversions run in floating point.** ``pycddlib-standalone`` provides cddlib's
+  float arithmetic only (no GMP fractions); vertex enumeration uses cddlib (the
+  vertices are checked against the inequalities afterwards), convex hulls use Qhull,
+  and the right-hand sides of every hull are recomputed from the points
+  (``b_k = max_i a_k.v_i``), so a hull always contains its input points up to the
+  rounding of that evaluation.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
-from typing import Any
+import itertools
+from collections.abc import Iterable, Iterator, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._validate import as_points
-from ..exceptions import DimensionError, InvalidBoundsError
+from .._validate import as_boxes, as_points
+from ..exceptions import (
+    DimensionError,
+    EmptySetError,
+    InvalidBoundsError,
+    SolverError,
+    UnboundedSetError,
+)
+from . import _hull, _lp
+from ._boxkernel import BoxKernel, points_le
+from .base import SetBase
+from .box import Box
 
-__all__ = ["Polytope", "PolytopeUnion"]
+__all__ = ["Polytope", "PolytopeUnion", "hull"]
+
+#: Relative LP decision tolerance (multiplied by the scale of the data).
+RTOL = 1e-9
+_U = 2.0 ** -53
+_MAX_VERTEX_SUMS = 200_000
 
 
-class Polytope:
+class _Rows(NamedTuple):
+    """The rows of a polytope that constrain anything, raw and normalised."""
+
+    A: np.ndarray  # (k, n) raw finite rows with finite b and a != 0
+    b: np.ndarray
+    An: np.ndarray  # rows scaled to unit 2-norm
+    bn: np.ndarray
+    empty: bool  # trivially empty (a row 0.x <= b < 0 or b = -inf)
+    tol: float  # LP decision tolerance
+
+
+def _gamma(k: int) -> float:
+    return k * _U / (1.0 - k * _U)
+
+
+def _as_matrix(M: Any, n: int, name: str) -> np.ndarray:
+    arr = np.asarray(M, dtype=float)
+    if arr.ndim == 0:
+        arr = float(arr) * np.eye(n)
+    if arr.ndim != 2:
+        raise DimensionError(f"{name} must be a 2-D array; got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise InvalidBoundsError(f"{name} contains NaN or an infinite entry")
+    return arr
+
+
+def _as_vector(t: Any, p: int, name: str) -> np.ndarray:
+    if t is None:
+        return np.zeros(p)
+    arr = np.asarray(t, dtype=float).ravel()
+    if arr.shape != (p,):
+        raise DimensionError(f"{name} must have shape ({p},); got {np.shape(t)}")
+    if not np.isfinite(arr).all():
+        raise InvalidBoundsError(f"{name} contains NaN or an infinite entry")
+    return arr
+
+
+class Polytope(SetBase):
     """The polyhedron ``{x in R^n : A x <= b}``.
 
     Parameters
@@ -30,6 +102,16 @@ class Polytope:
     InvalidBoundsError
         ``A`` or ``b`` contains NaN, or ``A`` contains an infinite entry.
 
+    Notes
+    -----
+    Thesis §3.2 (polytope geometry): intersection, set difference (a union of polytopes
+    built from the complement of the subtrahend row by row), convex hull of a union;
+    §3.4 pre-sets by projection; §6.1.4 box tests against unions of polytopes.
+    Unbounded polyhedra are allowed wherever the operation makes sense; operations that
+    need a bounded non-empty set (vertices, volume, Chebyshev ball, plotting) raise
+    :class:`~casadi_cmpc.exceptions.UnboundedSetError` or
+    :class:`~casadi_cmpc.exceptions.EmptySetError`.
+
     Examples
     --------
     >>> import casadi_cmpc as cm
@@ -38,9 +120,16 @@ class Polytope:
     2
     >>> P.contains([[0.5, 0.5], [2.0, 0.0]])
     array([ True, False])
+    >>> P.contains_box([[[0, 1], [-1, 0.5]], [[0, 2], [0, 1]]])
+    array([ True, False])
+    >>> float(P.volume())
+    4.0
+    >>> Q = P.project([0])
+    >>> Q.bounding_box()
+    Box([-1], [1])
     """
 
-    __slots__ = ("A", "b")
+    __array_ufunc__ = None  # numpy defers ``M @ P``, ``t + P`` to the Polytope
 
     def __init__(self, A: Any, b: Any) -> None:
         A_a = np.array(A, dtype=float)
@@ -62,7 +151,110 @@ class Polytope:
         b_a.setflags(write=False)
         self.A = A_a
         self.b = b_a
+        self._cache: dict[str, Any] = {}
 
+    # ------------------------------------------------------------ constructors
+    @classmethod
+    def from_vertices(cls, V: Any) -> Polytope:
+        """Convex hull of points, in H-representation.
+
+        Parameters
+        ----------
+        V : array_like, shape (N, n)
+            At least one finite point. Points that are not extreme are dropped.
+
+        Returns
+        -------
+        Polytope
+            Unit-norm rows; a hull of affine dimension ``r < n`` also gets the pairs of
+            rows ``±v`` of the normals of its affine hull. The extreme points are cached
+            as :meth:`vertices`.
+
+        Raises
+        ------
+        DimensionError
+            ``V`` is not a non-empty 2-D array.
+        InvalidBoundsError
+            ``V`` contains NaN or an infinite entry.
+        """
+        P = np.asarray(V, dtype=float)
+        if P.ndim == 1:
+            P = P[None]
+        if P.ndim != 2 or P.shape[0] == 0 or P.shape[1] == 0:
+            raise DimensionError(
+                f"points must be a non-empty array of shape (N, n); got {np.shape(V)}")
+        if not np.isfinite(P).all():
+            raise InvalidBoundsError("points contain NaN or an infinite entry")
+        A, b, verts = _hull.hull_hrep(P)
+        out = cls(A, b)
+        out._cache.update(vertices=verts, empty=False, bounded=True)
+        return out
+
+    @classmethod
+    def convex_hull(cls, points: Any) -> Polytope:
+        """Convex hull of points (same as :meth:`from_vertices`).
+
+        Parameters
+        ----------
+        points : array_like, shape (N, n)
+
+        Returns
+        -------
+        Polytope
+        """
+        return cls.from_vertices(points)
+
+    @classmethod
+    def from_box(cls, box: Any) -> Polytope:
+        """The box ``[lo, hi]`` as ``{x : x <= hi, -x <= -lo}`` (infinite bounds allowed).
+
+        Parameters
+        ----------
+        box : Box or array_like, shape (n, 2)
+
+        Returns
+        -------
+        Polytope
+        """
+        arr = as_boxes(box, None, "box")
+        if arr.shape[0] != 1:
+            raise DimensionError(f"box must be one box; got a batch of {arr.shape[0]}")
+        lo, hi = arr[0, :, 0], arr[0, :, 1]
+        n = lo.size
+        return cls(np.vstack([np.eye(n), -np.eye(n)]), np.concatenate([hi, -lo]))
+
+    @classmethod
+    def empty(cls, n: int) -> Polytope:
+        """The empty set of ``R^n`` (the single row ``0.x <= -1``).
+
+        Parameters
+        ----------
+        n : int
+            Dimension.
+
+        Returns
+        -------
+        Polytope
+        """
+        out = cls(np.zeros((1, int(n))), [-1.0])
+        out._cache.update(empty=True, bounded=True)
+        return out
+
+    @classmethod
+    def _coerce(cls, other: Any, n: int, name: str = "other") -> Polytope:
+        if isinstance(other, Polytope):
+            P = other
+        elif isinstance(other, Box):
+            P = cls.from_box(other)
+        elif hasattr(other, "to_polytope"):
+            P = other.to_polytope()
+        else:
+            raise TypeError(f"{name} must be a Polytope or a Box; got {type(other).__name__}")
+        if P.dim != n:
+            raise DimensionError(f"{name} has the wrong dimension; expected {n} instead of {P.dim}")
+        return P
+
+    # --------------------------------------------------------------- basics
     @property
     def dim(self) -> int:
         """Dimension n of the ambient space."""
@@ -72,6 +264,29 @@ class Polytope:
     def n_constraints(self) -> int:
         """Number k of half-spaces (rows of A)."""
         return int(self.A.shape[0])
+
+    def _rows(self) -> _Rows:
+        r = self._cache.get("rows")
+        if r is not None:
+            return r
+        A, b = self.A, self.b
+        norms = np.linalg.norm(A, axis=1)
+        trivially_empty = bool(np.any(b == -np.inf) or np.any((norms == 0) & (b < 0)))
+        keep = np.isfinite(b) & (norms > 0)
+        A_k, b_k, nk = A[keep], b[keep], norms[keep]
+        An = A_k / nk[:, None]
+        bn = b_k / nk
+        scale = max(1.0, float(np.abs(bn).max(initial=0.0)))
+        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale)
+        self._cache["rows"] = r
+        return r
+
+    def _kernel(self) -> BoxKernel:
+        k = self._cache.get("kernel")
+        if k is None:
+            R = self._rows()
+            k = self._cache["kernel"] = BoxKernel(R.A, R.b)
+        return k
 
     def contains(self, points: Any, tol: float = 0.0) -> np.ndarray | bool:
         """Membership of points: ``A p <= b + tol`` row by row.
@@ -89,60 +304,1081 @@ class Polytope:
             A single bool for one unbatched point.
         """
         p, batched = as_points(points, self.dim, name="points")
-        if self.n_constraints == 0:
-            inside = np.ones(p.shape[0], dtype=bool)
-        else:
-            inside = (p @ self.A.T <= self.b + float(tol)).all(axis=1)
+        inside = points_le(p, self.A, self.b + float(tol))
         return inside if batched else bool(inside[0])
+
+    # ------------------------------------------------------ LP-based queries
+    def _chebyshev(self) -> tuple[np.ndarray, float]:
+        """Chebyshev centre and signed radius (negative: empty; inf: unbounded radius)."""
+        c = self._cache.get("cheb")
+        if c is not None:
+            return c
+        R = self._rows()
+        n = self.dim
+        if R.empty:
+            c = (np.full(n, np.nan), -np.inf)
+        elif R.An.shape[0] == 0:
+            c = (np.zeros(n), np.inf)
+        else:
+            cap = 1e6 * R.tol / RTOL
+            rows = np.hstack([R.An, np.ones((R.An.shape[0], 1))])
+            cost = np.zeros(n + 1)
+            cost[-1] = -1.0
+            ub = np.full(n + 1, np.inf)
+            ub[-1] = cap
+            st, x, f, _ = _lp.lp(cost, rows, R.bn, -np.inf, ub)
+            _lp.check_status(st, "the Chebyshev ball")
+            r = float(x[-1])
+            c = (x[:n].copy(), np.inf if r >= cap * (1 - 1e-9) else r)
+        self._cache["cheb"] = c
+        return c
+
+    def is_empty(self) -> bool:
+        """True when the polytope is empty.
+
+        Decided by the Chebyshev LP ``max r s.t. a_i.x + r ||a_i|| <= b_i``: empty when
+        the optimum is ``< -tol`` (see the module notes), or when a row reads
+        ``0.x <= b < 0`` or ``b = -inf``.
+
+        Returns
+        -------
+        bool
+        """
+        e = self._cache.get("empty")
+        if e is None:
+            e = self._cache["empty"] = bool(self._chebyshev()[1] < -self._rows().tol)
+        return e
+
+    def is_full_dimensional(self) -> bool:
+        """True when the polytope has an interior point (Chebyshev radius ``> tol``).
+
+        Returns
+        -------
+        bool
+        """
+        return bool(self._chebyshev()[1] > self._rows().tol)
+
+    def chebyshev_ball(self) -> tuple[np.ndarray, float]:
+        """Centre and radius of the largest Euclidean ball inside the polytope.
+
+        Returns
+        -------
+        center : ndarray, shape (n,)
+        radius : float
+            ``>= 0``; 0 for a polytope without interior.
+
+        Raises
+        ------
+        EmptySetError
+            The polytope is empty.
+        UnboundedSetError
+            Balls of every radius fit (e.g. a half-space).
+        """
+        if self.is_empty():
+            raise EmptySetError("the Chebyshev ball of an empty polytope does not exist")
+        c, r = self._chebyshev()
+        if not np.isfinite(r):
+            raise UnboundedSetError(
+                "the polyhedron contains balls of every radius; intersect it with a Box")
+        return c.copy(), max(float(r), 0.0)
+
+    def is_bounded(self) -> bool:
+        """True when the polyhedron is bounded (the empty set is bounded).
+
+        A non-empty ``{A x <= b}`` is bounded iff its recession cone ``{d : A d <= 0}`` is
+        ``{0}``: ``A`` has rank n and ``max -1^T A d`` over ``{A d <= 0, |d|_inf <= 1}``
+        is 0 (one LP).
+
+        Returns
+        -------
+        bool
+        """
+        bnd = self._cache.get("bounded")
+        if bnd is not None:
+            return bnd
+        R = self._rows()
+        n = self.dim
+        if self.is_empty():
+            bnd = True
+        elif R.An.shape[0] < n + 1 or np.linalg.matrix_rank(R.An) < n:
+            bnd = False
+        else:
+            cost = R.An.sum(axis=0)  # minimise 1^T A d  <=>  maximise -1^T A d
+            st, _, f, _ = _lp.lp(cost, R.An, np.zeros(R.An.shape[0]), -1.0, 1.0)
+            _lp.check_status(st, "the boundedness test")
+            bnd = bool(-f <= 1e-9 * R.An.shape[0])
+        self._cache["bounded"] = bnd
+        return bnd
+
+    def _require_bounded_nonempty(self, what: str) -> None:
+        if self.is_empty():
+            raise EmptySetError(f"{what} of an empty polytope is not defined")
+        if not self.is_bounded():
+            raise UnboundedSetError(
+                f"{what} needs a bounded polytope; this one is unbounded "
+                "(intersect it with a Box first)")
+
+    def _max_lp(self, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``max d.x`` over the polytope for each row of D (K, n): values and maximisers."""
+        R = self._rows()
+        K, n = D.shape
+        m = R.An.shape[0]
+        res = _lp.block_lp(-D, np.tile(R.An, (K, 1)), np.tile(R.bn, K),
+                           np.repeat(np.arange(K), m))
+        _lp.check_status(res.status, "a support function")
+        vals = -res.fun
+        vals[res.status == _lp.UNBOUNDED] = np.inf
+        vals[res.status == _lp.INFEASIBLE] = -np.inf
+        return vals, res.x
+
+    def support(self, directions: Any) -> np.ndarray | float:
+        """Support function ``h(d) = max_{x in P} d.x``.
+
+        Parameters
+        ----------
+        directions : array_like, shape (k, n) or (n,)
+
+        Returns
+        -------
+        float or ndarray, shape (k,)
+            ``-inf`` for an empty polytope, ``+inf`` in directions of unboundedness.
+            Values come from the cached vertices when available, else from LPs.
+        """
+        D = np.asarray(directions, dtype=float)
+        single = D.ndim == 1
+        D = np.atleast_2d(D)
+        if D.ndim != 2 or D.shape[1] != self.dim:
+            raise DimensionError(
+                f"directions must have shape (k, {self.dim}) or ({self.dim},); "
+                f"got {np.shape(directions)}")
+        if self.is_empty():
+            val = np.full(D.shape[0], -np.inf)
+        elif "vertices" in self._cache:
+            val = (self._cache["vertices"] @ D.T).max(axis=0)
+        elif self._rows().An.shape[0] == 0:
+            val = np.where(np.any(D != 0, axis=1), np.inf, 0.0)
+        else:
+            val = self._max_lp(D)[0]
+        return float(val[0]) if single else val
+
+    def bounding_box(self) -> Box:
+        """Smallest box containing the polytope (infinite bounds where unbounded).
+
+        The support values are widened outward by ``1e-12 |v| + 4 ulp`` as a guard for
+        the rounding of the solver.
+
+        Returns
+        -------
+        Box
+
+        Raises
+        ------
+        EmptySetError
+            The polytope is empty.
+        """
+        if self.is_empty():
+            raise EmptySetError("an empty polytope has no bounding box")
+        n = self.dim
+        h = np.asarray(self.support(np.vstack([np.eye(n), -np.eye(n)])))
+        hi, lo = h[:n], -h[n:]
+        with np.errstate(invalid="ignore"):
+            hi = hi + (1e-12 * np.abs(hi) + 4 * np.abs(np.spacing(hi)))
+            lo = lo - (1e-12 * np.abs(lo) + 4 * np.abs(np.spacing(lo)))
+        hi = np.where(np.isnan(hi), np.inf, hi)
+        lo = np.where(np.isnan(lo), -np.inf, lo)
+        return Box(np.minimum(lo, hi), hi)
+
+    def vertices(self) -> np.ndarray:
+        """Vertices of the bounded polytope (cddlib double description, float).
+
+        Returns
+        -------
+        ndarray, shape (k, n)
+            The extreme points, each checked to satisfy ``A v <= b`` up to ``tol``.
+
+        Raises
+        ------
+        EmptySetError
+            The polytope is empty.
+        UnboundedSetError
+            The polytope is unbounded (it has no finite vertex description).
+        """
+        V = self._cache.get("vertices")
+        if V is not None:
+            return V.copy()
+        self._require_bounded_nonempty("the vertex list")
+        R = self._rows()
+        V = _hull.cdd_vertices(R.An, R.bn)
+        V = _dedupe(V, R.tol)
+        viol = (V @ R.An.T - R.bn).max(initial=-np.inf)
+        if viol > 100 * R.tol:
+            raise SolverError(
+                f"vertex enumeration is inaccurate (a vertex violates a row by {viol:.3g}); "
+                "rescale the polytope data")
+        V.setflags(write=False)
+        self._cache["vertices"] = V
+        return V.copy()
+
+    def volume(self) -> float:
+        """Lebesgue measure (Qhull triangulation of the vertices; 0 without interior).
+
+        Returns
+        -------
+        float
+
+        Raises
+        ------
+        EmptySetError, UnboundedSetError
+            The polytope is empty or unbounded.
+        """
+        self._require_bounded_nonempty("the volume")
+        if not self.is_full_dimensional():
+            return 0.0
+        V = self.vertices()
+        if self.dim == 1:
+            return float(V.max() - V.min())
+        from scipy.spatial import ConvexHull
+
+        return float(ConvexHull(V).volume)
+
+    # ------------------------------------------------------------ box tests
+    def contains_box(self, boxes: Any) -> np.ndarray:
+        """Inclusion of boxes in the polytope, in closed form.
+
+        ``box ⊆ P`` iff ``max_{x in box} a_i.x <= b_i`` for every row, and the maximum is
+        ``a_i^+ . hi - a_i^- . lo``. The test adds an a-priori bound on the rounding error
+        of that evaluation, so ``True`` is a proof; the few rows that the bound cannot
+        decide (a box touching a facet) are decided exactly with error-free products and a
+        correctly rounded sum, so the answer is exact for finite boxes.
+
+        Parameters
+        ----------
+        boxes : array_like, shape (N, n, 2) or (n, 2), or Box
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+        """
+        b = as_boxes(boxes, self.dim, "boxes")
+        R = self._rows()
+        if R.empty:
+            return np.zeros(b.shape[0], dtype=bool)
+        if R.A.shape[0] == 0:
+            return np.ones(b.shape[0], dtype=bool)
+        return self._kernel().all_le(b)
+
+    def intersects_box(self, boxes: Any) -> np.ndarray:
+        """Whether boxes meet the polytope; ``False`` only when ``box ∩ P = ∅`` is proven.
+
+        Stages (each on the boxes still undecided):
+
+        1. a row separates the box: ``min_{x in box} a_i.x > b_i`` with the rigorous
+           rounding bound -> ``False``;
+        2. for a bounded full-dimensional P with ``n <= 3`` (together with stage 1, in one
+           closed-form pass): the complete set of separating directions, i.e. the facet
+           normals of the projections of P on every proper subset of coordinates (facets
+           of ``P ⊕ box`` have such normals); separated with margin ``tol`` -> ``False``,
+           otherwise ``True``; on the line stage 1 alone is complete;
+        3. otherwise, a point of the box (its centre, the point of the box nearest to the
+           Chebyshev centre) lies in P -> ``True``;
+        4. the rest: one LP per box (stacked into block LPs): ``max r`` s.t.
+           ``a_i.x + r <= b_i`` (unit rows), ``x`` in the box. ``r >= -tol`` -> ``True``;
+           else the LP multipliers ``y >= 0`` give the implied inequality
+           ``y^T A x <= y^T b``, which is checked to separate the box with a rigorous
+           rounding bound -> ``False`` (``True`` if the check fails).
+
+        Parameters
+        ----------
+        boxes : array_like, shape (N, n, 2) or (n, 2), or Box
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+        """
+        bx = as_boxes(boxes, self.dim, "boxes")
+        N = bx.shape[0]
+        R = self._rows()
+        if R.empty:
+            return np.zeros(N, dtype=bool)
+        out = np.ones(N, dtype=bool)
+        if R.A.shape[0] == 0 or N == 0:
+            return out
+        if self.dim in (2, 3):
+            sat = self._sat()
+            if sat is not None:  # stages 1 and 2 in one closed-form pass
+                return ~sat.separates(bx)
+        sep = self._kernel().separates(bx)
+        out[sep] = False
+        und = np.flatnonzero(~sep)
+        if und.size == 0 or self.dim == 1:  # stage 1 is complete on the line
+            return out
+        if self.is_empty():
+            out[und] = False
+            return out
+        sub = bx[und]
+        lo, hi = sub[..., 0], sub[..., 1]
+        with np.errstate(invalid="ignore"):
+            mid = 0.5 * (lo + hi)
+        mid = np.where(np.isfinite(mid), mid, np.clip(0.0, lo, hi))
+        near = np.clip(self._chebyshev()[0], lo, hi)
+        hit = points_le(mid, R.A, R.b) | points_le(near, R.A, R.b)
+        und = und[~hit]
+        if und.size:
+            out[und] = ~self._lp_separated(bx[und])
+        return out
+
+    def _sat(self) -> BoxKernel | None:
+        """Rows of P and separating directions of its projections (n = 2, 3), or None.
+
+        For a bounded full-dimensional P the facet normals of ``P ⊕ box`` are facet
+        normals of P or (lifted) facet normals of the projections of P on proper subsets
+        of the coordinates, whatever the box; so a box misses P iff one of these rows
+        separates it. The offsets of the projections come from LPs and are used with the
+        margin ``tol``.
+        """
+        if "sat" in self._cache:
+            return self._cache["sat"]
+        n = self.dim
+        sat = None
+        if n in (2, 3) and not self.is_empty() and self.is_bounded() \
+                and self.is_full_dimensional():
+            R = self._rows()
+            rows, rhs = [R.A], [R.b]
+            for k in range(1, n):
+                for T in itertools.combinations(range(n), k):
+                    Q = self.project(list(T), method="support")
+                    QR = Q._rows()
+                    lifted = np.zeros((QR.A.shape[0], n))
+                    lifted[:, list(T)] = QR.A
+                    rows.append(lifted)
+                    rhs.append(QR.b + R.tol)
+            sat = BoxKernel(np.vstack(rows), np.concatenate(rhs))
+        self._cache["sat"] = sat
+        return sat
+
+    def _lp_separated(self, bx: np.ndarray) -> np.ndarray:
+        """Stage 4 of :meth:`intersects_box`: proven separation by LP multipliers."""
+        R = self._rows()
+        K, n = bx.shape[0], self.dim
+        m = R.An.shape[0]
+        rows = np.hstack([R.An, np.ones((m, 1))])
+        C = np.zeros((K, n + 1))
+        C[:, -1] = -1.0
+        lb = np.hstack([bx[..., 0], np.full((K, 1), -np.inf)])
+        ub = np.hstack([bx[..., 1], np.zeros((K, 1))])
+        res = _lp.block_lp(C, np.tile(rows, (K, 1)), np.tile(R.bn, K),
+                           np.repeat(np.arange(K), m), lb, ub)
+        r = res.x[:, -1]
+        cand = (res.status == _lp.OPTIMAL) & (r < -R.tol)
+        proven = np.zeros(K, dtype=bool)
+        idx = np.flatnonzero(cand)
+        if idx.size == 0:
+            return proven
+        norms = np.linalg.norm(R.A, axis=1)
+        Y = res.y.reshape(K, m)[idx] / norms  # multipliers of the raw rows
+        Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0)
+        proven[idx] = _certify_separation(Y, R.A, R.b, bx[idx])
+        return proven
+
+    # --------------------------------------------------------- redundancy
+    def minimal(self) -> Polytope:
+        """The same set without redundant rows (LP test per row, tolerance ``tol``).
+
+        Row ``i`` is redundant when ``max a_i.x`` over the other rows (with row ``i``
+        relaxed by 1) is ``<= b_i + tol``. Rows that are redundant only together (e.g.
+        duplicates) are removed one at a time, so one of each group is kept. Vacuous rows
+        (``b = inf``, ``0.x <= b >= 0``) are dropped.
+
+        Returns
+        -------
+        Polytope
+            The kept rows, unscaled. An empty polytope gives :meth:`empty`.
+        """
+        if self._cache.get("minimal") is True:
+            return self
+        m_cached = self._cache.get("minimal_poly")
+        if m_cached is not None:
+            return m_cached
+        n = self.dim
+        if self.is_empty():
+            return Polytope.empty(n)
+        R = self._rows()
+        A, b, An, bn, tol = R.A, R.b, R.An, R.bn, R.tol
+        m = An.shape[0]
+        # exact duplicate normals: keep the smallest right-hand side
+        order = np.lexsort((bn, *An.T[::-1]))
+        keep = np.ones(m, dtype=bool)
+        same = np.all(An[order][1:] == An[order][:-1], axis=1)
+        keep[order[1:][same]] = False
+        idx = np.flatnonzero(keep)
+        vals = self._row_maxima(An, bn, idx, idx)
+        essential = idx[vals > bn[idx] + tol]
+        cand = idx[vals <= bn[idx] + tol]
+        if cand.size:
+            vals2 = self._row_maxima(An, bn, cand, essential)
+            cand = cand[vals2 > bn[cand] + tol]
+            alive = set(cand.tolist())
+            for i in cand.tolist():
+                others = np.array(sorted(set(essential.tolist()) | (alive - {i})), dtype=int)
+                v = self._row_maxima(An, bn, np.array([i]), others)[0]
+                if v <= bn[i] + tol:
+                    alive.discard(i)
+            essential = np.array(sorted(set(essential.tolist()) | alive), dtype=int)
+        out = Polytope(A[essential], b[essential])
+        for key in ("empty", "bounded", "cheb", "vertices"):
+            if key in self._cache:
+                out._cache[key] = self._cache[key]
+        out._cache["minimal"] = True
+        self._cache["minimal_poly"] = out
+        return out
+
+    def remove_redundant(self) -> Polytope:
+        """Alias of :meth:`minimal`.
+
+        Returns
+        -------
+        Polytope
+        """
+        return self.minimal()
+
+    @staticmethod
+    def _row_maxima(An: np.ndarray, bn: np.ndarray, test: np.ndarray,
+                    against: np.ndarray) -> np.ndarray:
+        """``max a_i.x`` s.t. rows ``against`` (row i itself relaxed by 1), i in ``test``."""
+        K = test.size
+        if K == 0:
+            return np.zeros(0)
+        blocks_A, blocks_b, blk = [], [], []
+        for k, i in enumerate(test.tolist()):
+            rows = against[against != i]
+            blocks_A.append(An[rows])
+            blocks_b.append(bn[rows])
+            blocks_A.append(An[[i]])
+            blocks_b.append(bn[[i]] + max(1.0, abs(bn[i])))
+            blk.append(np.full(rows.size + 1, k))
+        res = _lp.block_lp(-An[test], np.vstack(blocks_A), np.concatenate(blocks_b),
+                           np.concatenate(blk))
+        _lp.check_status(res.status, "the redundancy test")
+        vals = -res.fun
+        vals[res.status == _lp.UNBOUNDED] = np.inf
+        return vals
+
+    # ----------------------------------------------------- set operations
+    def intersect(self, other: Any) -> Polytope:
+        """Intersection ``P ∩ Q`` (rows stacked, redundant rows kept).
+
+        Parameters
+        ----------
+        other : Polytope or Box
+
+        Returns
+        -------
+        Polytope
+        """
+        Q = Polytope._coerce(other, self.dim)
+        return Polytope(np.vstack([self.A, Q.A]), np.concatenate([self.b, Q.b]))
+
+    def __and__(self, other: Any) -> Polytope:
+        if isinstance(other, (Polytope, Box)) or hasattr(other, "to_polytope"):
+            return self.intersect(other)
+        return NotImplemented
+
+    __rand__ = __and__
+
+    def hull(self, *others: Any) -> Polytope:
+        """Convex hull of this polytope and others (see :func:`hull`).
+
+        Parameters
+        ----------
+        *others : Polytope, Box or PolytopeUnion
+
+        Returns
+        -------
+        Polytope
+        """
+        return hull(self, *others)
+
+    def translate(self, t: Any) -> Polytope:
+        """The translate ``P + t = {x + t : x in P}``.
+
+        Parameters
+        ----------
+        t : array_like, shape (n,)
+
+        Returns
+        -------
+        Polytope
+        """
+        t = _as_vector(t, self.dim, "t")
+        with np.errstate(invalid="ignore"):
+            b = self.b + self.A @ t
+        out = Polytope(self.A, np.where(np.isnan(b), self.b, b))
+        if "vertices" in self._cache:
+            out._cache["vertices"] = self._cache["vertices"] + t
+        return out
+
+    def affine_map(self, M: Any, t: Any = None) -> Polytope:
+        """Image ``{M x + t : x in P}`` under an affine map.
+
+        Invertible square ``M`` (condition number ``< 1e10``): exact in H-representation,
+        ``{y : A M^{-1} y <= b + A M^{-1} t}``. Otherwise the image of the vertices (bounded
+        P) or the projection of the lifted set ``{(x, y) : A x <= b, y = M x + t}``
+        (unbounded P, by block elimination).
+
+        Parameters
+        ----------
+        M : array_like, shape (p, n), or a scalar (``M = s I``)
+        t : array_like, shape (p,), optional
+
+        Returns
+        -------
+        Polytope
+            A polytope of dimension p.
+        """
+        n = self.dim
+        M = _as_matrix(M, n, "M")
+        if M.shape[1] != n:
+            raise DimensionError(f"M must have {n} columns; got shape {M.shape}")
+        p = M.shape[0]
+        t = _as_vector(t, p, "t")
+        if self.is_empty():
+            return Polytope.empty(p)
+        R = self._rows()
+        if p == n and np.linalg.cond(M) < 1e10:
+            AMi = np.linalg.solve(M.T, R.A.T).T
+            out = Polytope(AMi, R.b + AMi @ t)
+            if "vertices" in self._cache:
+                out._cache["vertices"] = self._cache["vertices"] @ M.T + t
+            return out
+        if self.is_bounded():
+            return Polytope.from_vertices(self.vertices() @ M.T + t)
+        lifted_A = np.vstack([np.hstack([R.A, np.zeros((R.A.shape[0], p))]),
+                              np.hstack([-M, np.eye(p)]), np.hstack([M, -np.eye(p)])])
+        lifted_b = np.concatenate([R.b, t, -t])
+        return Polytope(lifted_A, lifted_b).project(list(range(n, n + p)),
+                                                    method="elimination")
+
+    def inverse_image(self, M: Any, t: Any = None) -> Polytope:
+        """Pre-image ``{x : M x + t in P}`` (exact in H-representation).
+
+        Parameters
+        ----------
+        M : array_like, shape (n, p), or a scalar (``M = s I``)
+        t : array_like, shape (n,), optional
+
+        Returns
+        -------
+        Polytope
+            ``{x in R^p : (A M) x <= b - A t}``.
+        """
+        n = self.dim
+        M = _as_matrix(M, n, "M")
+        if M.shape[0] != n:
+            raise DimensionError(f"M must have {n} rows; got shape {M.shape}")
+        t = _as_vector(t, n, "t")
+        return Polytope(self.A @ M, self.b - self.A @ t)
+
+    def minkowski_sum(self, other: Any) -> Polytope:
+        """Minkowski sum ``P ⊕ Q = {x + y : x in P, y in Q}``.
+
+        Bounded operands: convex hull of the pairwise sums of vertices (when there are at
+        most 200 000 sums), otherwise projection of the lifted set
+        ``{(x, z) : A_P x <= b_P, A_Q (z - x) <= b_Q}`` on z.
+
+        Parameters
+        ----------
+        other : Polytope or Box
+
+        Returns
+        -------
+        Polytope
+        """
+        n = self.dim
+        Q = Polytope._coerce(other, n)
+        if self.is_empty() or Q.is_empty():
+            return Polytope.empty(n)
+        if self.is_bounded() and Q.is_bounded():
+            V1, V2 = self.vertices(), Q.vertices()
+            if V1.shape[0] * V2.shape[0] <= _MAX_VERTEX_SUMS:
+                return Polytope.from_vertices((V1[:, None, :] + V2[None]).reshape(-1, n))
+        R1, R2 = self._rows(), Q._rows()
+        lifted_A = np.vstack([np.hstack([R1.A, np.zeros((R1.A.shape[0], n))]),
+                              np.hstack([-R2.A, R2.A])])
+        lifted_b = np.concatenate([R1.b, R2.b])
+        return Polytope(lifted_A, lifted_b).project(list(range(n, 2 * n)))
+
+    def pontryagin_difference(self, other: Any) -> Polytope:
+        """Pontryagin difference ``P ⊖ Q = {x : x + Q ⊆ P}`` (exact in H-representation).
+
+        ``{x : a_i.x <= b_i - h_Q(a_i)}`` with ``h_Q`` the support function of Q.
+
+        Parameters
+        ----------
+        other : set with ``dim`` and ``support`` (Polytope, Box, Zonotope, ...)
+
+        Returns
+        -------
+        Polytope
+            ``R^n`` (no finite row) when Q is empty.
+        """
+        n = self.dim
+        if not hasattr(other, "support") or getattr(other, "dim", None) != n:
+            raise TypeError(
+                f"other must be a set of dimension {n} with a support function; "
+                f"got {type(other).__name__}")
+        R = self._rows()
+        if R.empty:
+            return Polytope.empty(n)
+        h = np.atleast_1d(np.asarray(other.support(R.A), dtype=float)) if R.A.shape[0] else \
+            np.zeros(0)
+        with np.errstate(invalid="ignore"):
+            b = R.b - h
+        return Polytope(R.A, np.where(np.isnan(b), -np.inf, b))
+
+    def __add__(self, other: Any) -> Polytope:
+        if isinstance(other, (Polytope, Box)) or hasattr(other, "to_polytope"):
+            return self.minkowski_sum(other)
+        try:
+            return self.translate(other)
+        except (TypeError, ValueError):
+            return NotImplemented
+
+    __radd__ = __add__
+
+    def __sub__(self, other: Any) -> Polytope:
+        if isinstance(other, SetBase):
+            return self.pontryagin_difference(other)
+        try:
+            return self.translate(-np.asarray(other, dtype=float))
+        except (TypeError, ValueError):
+            return NotImplemented
+
+    def __neg__(self) -> Polytope:
+        return self.affine_map(-np.eye(self.dim))
+
+    def __rmatmul__(self, M: Any) -> Polytope:
+        return self.affine_map(M)
+
+    def __mul__(self, s: Any) -> Polytope:
+        if np.ndim(s) != 0:
+            return NotImplemented
+        return self.affine_map(float(s) * np.eye(self.dim))
+
+    __rmul__ = __mul__
+
+    # -------------------------------------------------------- projection
+    def project(self, dims: Sequence[int], method: str = "auto") -> Polytope:
+        """Exact projection ``{x_dims : x in P}`` onto a subset of the coordinates.
+
+        Parameters
+        ----------
+        dims : sequence of int
+            Distinct coordinates kept, in the order of the result.
+        method : {"auto", "support", "vertices", "elimination"}
+            ``"support"``: iterative hull by LPs (bounded P): LP maximisers in
+            ``±e_i`` and a few fixed random directions give points of the projection;
+            the facets of their convex hull are checked one by one by an LP in the facet
+            normal; a facet whose LP value exceeds its offset yields a new point and the
+            hull is rebuilt, until every facet is confirmed (LP value ``<= offset + tol``).
+            A projection of lower dimension is found first (LPs in the normals of the
+            affine hull of the points) and handled in its affine hull. About
+            ``#facets + #vertices`` LPs of the projection, stacked per round.
+            ``"vertices"``: vertex enumeration of P, then the hull of the projected
+            vertices. ``"elimination"``: cddlib block elimination (Fourier–Motzkin by the
+            double description of the dual cone) and redundancy removal; works for
+            unbounded P. ``"auto"``: ``"elimination"`` for unbounded P, ``"support"``
+            for ``len(dims) <= 4``, else ``"vertices"``.
+
+        Returns
+        -------
+        Polytope
+            Of dimension ``len(dims)``; vertices are cached for the bounded methods.
+
+        Raises
+        ------
+        ValueError
+            Bad ``dims`` or unknown ``method``.
+        UnboundedSetError
+            ``"support"`` or ``"vertices"`` on an unbounded polytope.
+        """
+        n = self.dim
+        try:
+            dl = [int(d) for d in dims]
+        except TypeError as exc:
+            raise ValueError(f"dims must be a sequence of ints; got {dims!r}") from exc
+        if not dl or len(set(dl)) != len(dl) or min(dl) < 0 or max(dl) >= n:
+            raise ValueError(
+                f"dims must be distinct coordinates in 0..{n - 1}; got {list(dims)}")
+        meth = str(method).lower()
+        valid = ("auto", "support", "vertices", "elimination")
+        if meth not in valid:
+            raise ValueError(f"Unknown projection method '{method}'; valid: {', '.join(valid)}")
+        d = len(dl)
+        if self.is_empty():
+            return Polytope.empty(d)
+        if dl == list(range(n)):
+            return Polytope(self.A, self.b)
+        if meth == "auto":
+            if not self.is_bounded():
+                meth = "elimination"
+            else:
+                meth = "support" if d <= 4 else "vertices"
+        if meth == "elimination":
+            R = self._rows()
+            A_p, b_p = _hull.cdd_eliminate(R.An, R.bn, dl)
+            return Polytope(A_p, b_p)
+        self._require_bounded_nonempty(f"the projection by method '{meth}'")
+        if meth == "vertices":
+            return Polytope.from_vertices(self.vertices()[:, dl])
+        return self._project_support(dl)
+
+    def _project_support(self, dims: list[int]) -> Polytope:
+        n, d = self.dim, len(dims)
+        tol = self._rows().tol
+
+        def lp_max(Dy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            D = np.zeros((Dy.shape[0], n))
+            D[:, dims] = Dy
+            vals, X = self._max_lp(D)
+            if not np.isfinite(vals).all():
+                raise SolverError("a projection LP did not reach a finite optimum")
+            return vals, X[:, dims]
+
+        rng = np.random.default_rng(0)
+        dirs = np.vstack([np.eye(d), -np.eye(d), rng.standard_normal((2 * d, d))])
+        _, Y = lp_max(dirs)
+        # affine hull of the projection
+        for _ in range(d + 1):
+            origin, U, Nc = _hull.affine_hull(Y)
+            if Nc.shape[1] == 0:
+                break
+            vmax, Ymax = lp_max(Nc.T)
+            vmin, Ymin = lp_max(-Nc.T)
+            if np.all(vmax + vmin <= tol):
+                break
+            Y = np.vstack([Y, Ymax, Ymin])
+        else:  # pragma: no cover
+            raise SolverError("could not determine the affine hull of the projection")
+        r = U.shape[1]
+        rows_y: list[np.ndarray] = []
+        rhs_y: list[np.ndarray] = []
+        if Nc.shape[1]:
+            rows_y += [Nc.T, -Nc.T]
+            rhs_y += [np.maximum(vmax, (Y @ Nc).max(axis=0)),
+                      np.maximum(vmin, (-Y @ Nc).max(axis=0))]
+        if r == 0:
+            out = Polytope(np.vstack(rows_y), np.concatenate(rhs_y))
+            out._cache.update(vertices=Y[:1].copy(), empty=False, bounded=True)
+            return out
+        if r == 1:
+            u = U[:, 0]
+            vals, Ye = lp_max(np.vstack([u, -u]))
+            rows_y += [u[None], -u[None]]
+            rhs_y += [np.array([max(vals[0], (Y @ u).max())]),
+                      np.array([max(vals[1], (-Y @ u).max())])]
+            verts = Ye
+        else:
+            confirmed: dict[tuple, float] = {}
+            for _ in range(100_000):
+                Z = (Y - origin) @ U
+                normals, vidx = _hull._qhull(Z)
+                offs = (Z @ normals.T).max(axis=0)
+                keys = [tuple(np.round(a, 9)) for a in normals]
+                todo = [i for i, k in enumerate(keys) if k not in confirmed]
+                if not todo:
+                    break
+                Dy = normals[todo] @ U.T
+                vals, Ynew = lp_max(Dy)
+                vals_z = vals - Dy @ origin
+                new = vals_z > offs[todo] + tol
+                for j, i in enumerate(todo):
+                    if not new[j]:
+                        confirmed[keys[i]] = max(float(vals_z[j]), float(offs[i]))
+                if not new.any():
+                    break
+                Y = np.vstack([Y, Ynew[new]])
+            else:  # pragma: no cover
+                raise SolverError("projection by support LPs did not converge")
+            final = np.array([max(confirmed.get(k, o), o) for k, o in zip(keys, offs,
+                                                                           strict=True)])
+            Ay = normals @ U.T
+            rows_y.append(Ay)
+            rhs_y.append(final + Ay @ origin)
+            verts = Y[np.sort(vidx)]
+        out = Polytope(np.vstack(rows_y), np.concatenate(rhs_y))
+        out._cache.update(vertices=_dedupe(verts, tol), empty=False, bounded=True)
+        return out
+
+    # ------------------------------------------------------ comparisons
+    def is_subset(self, other: Any, tol: float | None = None) -> bool:
+        """Whether ``P ⊆ other`` (LP test with tolerance).
+
+        For a polytope Q: ``max_{x in P} a_j.x <= b_j + tol`` for every (unit-scaled) row
+        j of Q. For a union: the set difference ``P \\ Q_1 \\ ... \\ Q_p`` has no piece
+        with an inner ball of radius ``> tol`` (see :meth:`PolytopeUnion.contains_box`).
+
+        Parameters
+        ----------
+        other : Polytope, Box or PolytopeUnion
+        tol : float, optional
+            Default: the tolerance of ``other`` (see the module notes).
+
+        Returns
+        -------
+        bool
+        """
+        n = self.dim
+        if isinstance(other, PolytopeUnion):
+            if other.dim != n:
+                raise DimensionError(
+                    f"other has the wrong dimension; expected {n} instead of {other.dim}")
+            if self.is_empty():
+                return True
+            R = self._rows()
+            box = self.bounding_box().as_array()[None]
+            centre = self._chebyshev()[0][None]
+            return _uncovered(other._members(), box, centre, [(R.An, R.bn)], tol)[0] is None
+        Q = Polytope._coerce(other, n)
+        if self.is_empty():
+            return True
+        QR = Q._rows()
+        if Q.is_empty():
+            return False
+        tol_ = QR.tol if tol is None else float(tol)
+        if QR.An.shape[0] == 0:
+            return True
+        h = np.asarray(self.support(QR.An))
+        return bool(np.all(h <= QR.bn + tol_))
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (Polytope, Box)):
+            if other.dim != self.dim:
+                return False
+            O = Polytope._coerce(other, self.dim)
+            return self.is_subset(O) and O.is_subset(self)
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def difference(self, other: Any) -> PolytopeUnion:
+        """Set difference ``P \\ Q`` as a union of polytopes (closure).
+
+        With ``J`` the rows of Q that cut P (``max_P a_j.x > b_j``), the pieces are
+        ``P ∩ {a_j.x >= b_j} ∩ {a_l.x <= b_l, l in J before j}``. For a full-dimensional
+        P, pieces without interior (Chebyshev radius ``<= tol``) are dropped, so the
+        union is the closure of ``P \\ Q``; for a lower-dimensional P only empty pieces
+        are dropped.
+
+        Parameters
+        ----------
+        other : Polytope or Box
+
+        Returns
+        -------
+        PolytopeUnion
+            Possibly with no member (``P ⊆ Q``).
+        """
+        n = self.dim
+        Q = Polytope._coerce(other, n)
+        if self.is_empty():
+            return PolytopeUnion([], dim=n)
+        if Q.is_empty():
+            return PolytopeUnion([Polytope(self.A, self.b)], dim=n)
+        QR = Q._rows()
+        tol = self._rows().tol
+        h = np.asarray(self.support(QR.An)) if QR.An.shape[0] else np.zeros(0)
+        J = np.flatnonzero(h > QR.bn + tol)
+        full = self.is_full_dimensional()
+        pieces = []
+        for k, j in enumerate(J.tolist()):
+            prev = J[:k]
+            Pk = Polytope(np.vstack([self.A, -QR.A[[j]], QR.A[prev]]),
+                          np.concatenate([self.b, -QR.b[[j]], QR.b[prev]]))
+            r = Pk._chebyshev()[1]
+            if (r > tol) if full else (r >= -tol):
+                pieces.append(Pk)
+        return PolytopeUnion(pieces, dim=n)
+
+    # ---------------------------------------------------------- plotting
+    def _plot_points(self, dims: tuple[int, int]) -> np.ndarray:
+        if self.is_empty():
+            return np.zeros((0, 2))
+        if not self.is_bounded():
+            raise UnboundedSetError(
+                "cannot plot an unbounded polyhedron; intersect it with a Box first")
+        if self.dim <= 2:
+            return super()._plot_points(dims)
+        return self.project(list(dims)).vertices()
+
+    # ------------------------------------------------------- persistence
+    def _state(self) -> dict[str, Any]:
+        return {"A": np.array(self.A), "b": np.array(self.b)}
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> Polytope:
+        return cls(state["A"], state["b"])
 
     def __repr__(self) -> str:
         return f"Polytope(dim={self.dim}, constraints={self.n_constraints})"
 
 
-class PolytopeUnion:
+def _dedupe(V: np.ndarray, tol: float) -> np.ndarray:
+    """Drop points closer than ``tol`` (inf-norm) to an earlier point."""
+    if V.shape[0] <= 1:
+        return V.copy()
+    key = np.round(V / max(tol, 1e-300))
+    _, idx = np.unique(key, axis=0, return_index=True)
+    return V[np.sort(idx)].copy()
+
+
+def _certify_separation(Y: np.ndarray, A: np.ndarray, b: np.ndarray,
+                        bx: np.ndarray) -> np.ndarray:
+    """Rigorous check that ``y^T A x <= y^T b`` excludes each box.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (K, m), >= 0
+    A, b : raw finite rows of the polytope
+    bx : ndarray, shape (K, n, 2)
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+        True where ``min_{x in box} (A^T y).x - y^T b > 0`` holds including every rounding
+        error of the evaluation (so the box does not meet the polytope).
+    """
+    K, m = Y.shape
+    n = A.shape[1]
+    G = Y @ A
+    beta = Y @ b
+    Ge = _gamma(m + 2) * (Y @ np.abs(A))  # |G - exact| <= Ge
+    be = _gamma(m + 2) * (Y @ np.abs(b))
+    lo, hi = bx[..., 0], bx[..., 1]
+    with np.errstate(invalid="ignore", over="ignore"):
+        t = np.where(G > 0, G * lo, np.where(G < 0, G * hi, 0.0))
+        M = np.maximum(np.abs(lo), np.abs(hi))
+        L = t.sum(axis=1)
+        err = (_gamma(n + 2) * np.where(np.isfinite(t), np.abs(t), 0.0).sum(axis=1)
+               + np.where(Ge > 0, Ge * M, 0.0).sum(axis=1) + be)
+        slack = L - beta
+        err = (err + _gamma(4) * (np.abs(L) + np.abs(beta))) * (1 + 8 * _U) + 1e-300
+        ok = slack > err
+    return np.where(np.isfinite(slack) & np.isfinite(err), ok, False)
+
+
+def hull(*sets: Any) -> Polytope:
+    """Convex hull of the union of bounded sets (thesis §3.2).
+
+    Parameters
+    ----------
+    *sets : Polytope, Box, PolytopeUnion, or any set with ``vertices()``
+        At least one, all of the same dimension; empty polytopes are ignored.
+
+    Returns
+    -------
+    Polytope
+        The empty polytope when every set is empty.
+
+    Raises
+    ------
+    UnboundedSetError
+        A set is unbounded.
+
+    Examples
+    --------
+    >>> import casadi_cmpc as cm
+    >>> T1 = cm.Polytope.from_vertices([[0, 0], [1, 0], [0, 1]])
+    >>> T2 = T1.translate([1, 1])
+    >>> float(round(cm.hull(T1, T2).volume(), 12))
+    2.5
+    """
+    if not sets:
+        raise ValueError("hull needs at least one set")
+    dims = {s.dim for s in sets}
+    if len(dims) != 1:
+        raise DimensionError(f"hull: the sets differ in dimension: {sorted(dims)}")
+    n = dims.pop()
+    pts = []
+    for s in sets:
+        if isinstance(s, Box):
+            if not s.is_bounded():
+                raise UnboundedSetError("hull: a Box has an infinite bound")
+            pts.append(s.vertices())
+        elif isinstance(s, (Polytope, PolytopeUnion)):
+            if not s.is_empty():
+                pts.append(s.vertices())
+        else:
+            pts.append(np.asarray(s.vertices(), dtype=float))
+    if not pts:
+        return Polytope.empty(n)
+    return Polytope.from_vertices(np.vstack(pts))
+
+
+# ============================================================ unions
+class PolytopeUnion(SetBase):
     """A finite union ``P_1 ∪ ... ∪ P_p`` of polytopes of the same dimension.
 
     Parameters
     ----------
     polytopes : iterable of Polytope
-        At least one polytope; all of the same dimension.
+        All of the same dimension. May be empty only when ``dim`` is given.
+    dim : int, optional
+        Dimension; required for a union without members (the empty set).
 
     Raises
     ------
     TypeError
         An element is not a :class:`Polytope`.
     ValueError
-        The iterable is empty.
+        The iterable is empty and ``dim`` is not given.
     DimensionError
-        The polytopes have different dimensions.
+        The polytopes have different dimensions, or differ from ``dim``.
+
+    Examples
+    --------
+    >>> import casadi_cmpc as cm
+    >>> L = cm.Polytope.from_box(cm.Box([0, 0], [1, 1]))
+    >>> R = cm.Polytope.from_box(cm.Box([1, 0], [2, 1]))
+    >>> S = cm.PolytopeUnion([L, R])
+    >>> bool(L.contains_box(cm.Box([0.5, 0.2], [1.5, 0.8]))[0])
+    False
+    >>> S.contains_box(cm.Box([0.5, 0.2], [1.5, 0.8]))
+    array([ True])
     """
 
-    __slots__ = ("polytopes",)
+    __array_ufunc__ = None
 
-    def __init__(self, polytopes: Iterable[Polytope]) -> None:
+    def __init__(self, polytopes: Iterable[Polytope], dim: int | None = None) -> None:
         items = tuple(polytopes)
-        if not items:
-            raise ValueError("PolytopeUnion needs at least one polytope")
         for i, P in enumerate(items):
             if not isinstance(P, Polytope):
                 raise TypeError(
                     f"PolytopeUnion element {i} is a {type(P).__name__}, not a Polytope")
+        if not items and dim is None:
+            raise ValueError("PolytopeUnion needs at least one polytope (or dim= for an "
+                             "empty union)")
         dims = {P.dim for P in items}
+        if dim is not None:
+            dims.add(int(dim))
         if len(dims) != 1:
             raise DimensionError(
                 f"PolytopeUnion polytopes differ in dimension: {sorted(dims)}")
         self.polytopes: tuple[Polytope, ...] = items
+        self._dim = dims.pop()
 
     @property
     def dim(self) -> int:
         """Dimension n of the ambient space."""
-        return self.polytopes[0].dim
+        return self._dim
 
     def __len__(self) -> int:
         return len(self.polytopes)
 
     def __iter__(self) -> Iterator[Polytope]:
         return iter(self.polytopes)
+
+    def _members(self) -> list[Polytope]:
+        return [P for P in self.polytopes if not P.is_empty()]
 
     def contains(self, points: Any, tol: float = 0.0) -> np.ndarray | bool:
         """Membership of points in at least one of the polytopes.
@@ -163,5 +1399,339 @@ class PolytopeUnion:
             inside |= P.contains(p, tol=tol)
         return inside if batched else bool(inside[0])
 
+    def is_empty(self) -> bool:
+        """True when every member is empty.
+
+        Returns
+        -------
+        bool
+        """
+        return all(P.is_empty() for P in self.polytopes)
+
+    def contains_box(self, boxes: Any, return_witness: bool = False
+                     ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Exact test ``box ⊆ P_1 ∪ ... ∪ P_p`` (thesis §6.1.4).
+
+        1. ``box ⊆ P_i`` for some i, in closed form (rounding-safe) -> ``True``;
+        2. the centre or (for n <= 4) a corner of the box is outside every member ->
+           ``False``;
+        3. the rest: ``box ⊆ ∪ P_i`` iff ``box \\ P_1 \\ ... \\ P_p`` has no interior.
+           The difference is built member by member, each piece ``R`` minus ``P_i``
+           being split into ``R ∩ {a_j.x >= b_j} ∩ {a_l.x <= b_l, l < j}`` over the rows
+           of ``P_i`` that cut the box (rows whose half-space holds the box, or members
+           separated from the box, are skipped in closed form). After each member the new
+           pieces of all boxes are pruned together by one stacked Chebyshev LP
+           (``max r`` s.t. ``a.x + r <= b`` for the unit rows of the piece, ``x`` in the
+           box): a piece with ``r <= tol`` has no point outside the members by more than
+           ``tol`` and is dropped. ``True`` when no piece is left.
+
+        ``True`` of stage 3 therefore means ``box ⊆ ∪_i {x : A_i x <= b_i + tol}``
+        (unit rows); ``False`` comes with a witness point of the box that lies outside
+        every member by at least ``tol``.
+
+        Parameters
+        ----------
+        boxes : array_like, shape (N, n, 2) or (n, 2), or Box
+        return_witness : bool, optional
+            Also return, per box, a point of the box outside the union (NaN where the box
+            is contained).
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+            And the witnesses ``(N, n)`` when ``return_witness``.
+        """
+        bx = as_boxes(boxes, self.dim, "boxes")
+        N, n = bx.shape[0], self.dim
+        members = self._members()
+        out = np.zeros(N, dtype=bool)
+        wit = np.full((N, n), np.nan)
+        for P in members:
+            und = np.flatnonzero(~out)
+            if und.size == 0:
+                break
+            out[und[P.contains_box(bx[und])]] = True
+        und = np.flatnonzero(~out)
+        if und.size and members:
+            sub = bx[und]
+            lo, hi = sub[..., 0], sub[..., 1]
+            with np.errstate(invalid="ignore"):
+                mid = 0.5 * (lo + hi)
+            cands = [np.where(np.isfinite(mid), mid, np.clip(0.0, lo, hi))]
+            if n <= 4:
+                for bits in itertools.product((0, 1), repeat=n):
+                    cands.append(np.where(np.array(bits, dtype=bool), hi, lo))
+            decided = np.zeros(und.size, dtype=bool)
+            for c in cands:
+                outside = ~self.contains(c) & np.isfinite(c).all(axis=1) & ~decided
+                wit[und[outside]] = c[outside]
+                decided |= outside
+            und = und[~decided]
+        elif und.size:  # empty union
+            sub = bx[und]
+            wit[und] = np.clip(0.0, sub[..., 0], sub[..., 1])
+            und = und[:0]
+        if und.size:
+            sub = bx[und]
+            with np.errstate(invalid="ignore"):
+                mid = 0.5 * (sub[..., 0] + sub[..., 1])
+            mid = np.where(np.isfinite(mid), mid, np.clip(0.0, sub[..., 0], sub[..., 1]))
+            witnesses = _uncovered(members, sub, mid)
+            for j, k in enumerate(und.tolist()):
+                if witnesses[j] is None:
+                    out[k] = True
+                else:
+                    wit[k] = witnesses[j]
+        return (out, wit) if return_witness else out
+
+    def intersects_box(self, boxes: Any) -> np.ndarray:
+        """Whether boxes meet some member; ``False`` only when proven (see
+        :meth:`Polytope.intersects_box`).
+
+        Parameters
+        ----------
+        boxes : array_like, shape (N, n, 2) or (n, 2), or Box
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+        """
+        bx = as_boxes(boxes, self.dim, "boxes")
+        out = np.zeros(bx.shape[0], dtype=bool)
+        for P in self.polytopes:
+            und = np.flatnonzero(~out)
+            if und.size == 0:
+                break
+            out[und[P.intersects_box(bx[und])]] = True
+        return out
+
+    def support(self, directions: Any) -> np.ndarray | float:
+        """Support function: the maximum over the members.
+
+        Parameters
+        ----------
+        directions : array_like, shape (k, n) or (n,)
+
+        Returns
+        -------
+        float or ndarray, shape (k,)
+            ``-inf`` for an empty union.
+        """
+        D = np.asarray(directions, dtype=float)
+        single = D.ndim == 1
+        D = np.atleast_2d(D)
+        if D.ndim != 2 or D.shape[1] != self.dim:
+            raise DimensionError(
+                f"directions must have shape (k, {self.dim}) or ({self.dim},); "
+                f"got {np.shape(directions)}")
+        val = np.full(D.shape[0], -np.inf)
+        for P in self._members():
+            val = np.maximum(val, np.asarray(P.support(D)))
+        return float(val[0]) if single else val
+
+    def bounding_box(self) -> Box:
+        """Smallest box containing every member.
+
+        Returns
+        -------
+        Box
+
+        Raises
+        ------
+        EmptySetError
+            The union is empty.
+        """
+        members = self._members()
+        if not members:
+            raise EmptySetError("an empty union of polytopes has no bounding box")
+        boxes = [P.bounding_box() for P in members]
+        return Box(np.min([B.lo for B in boxes], axis=0), np.max([B.hi for B in boxes], axis=0))
+
+    def convex_hull(self) -> Polytope:
+        """Convex hull of the union.
+
+        Returns
+        -------
+        Polytope
+        """
+        return hull(self)
+
+    def vertices(self) -> np.ndarray:
+        """Vertices of the convex hull of the union.
+
+        Returns
+        -------
+        ndarray, shape (k, n)
+
+        Raises
+        ------
+        EmptySetError, UnboundedSetError
+            The union is empty, or a member is unbounded.
+        """
+        members = self._members()
+        if not members:
+            raise EmptySetError("an empty union of polytopes has no vertex")
+        pts = np.vstack([P.vertices() for P in members])
+        return _hull.hull_hrep(pts)[2]
+
+    def difference(self, other: Any) -> PolytopeUnion:
+        """Set difference ``(∪ P_i) \\ Q`` as a union (closure), member by member.
+
+        Parameters
+        ----------
+        other : Polytope or Box
+
+        Returns
+        -------
+        PolytopeUnion
+        """
+        pieces: list[Polytope] = []
+        for P in self._members():
+            pieces.extend(P.difference(other).polytopes)
+        return PolytopeUnion(pieces, dim=self.dim)
+
+    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), **kw: Any) -> Any:
+        """Draw every member in 2-D (projections on ``dims`` for n > 2).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Created when omitted.
+        dims : (int, int)
+            Coordinates drawn on the horizontal and vertical axes.
+        **kw
+            Passed to matplotlib for every member.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        from ..plot import new_axes
+
+        ax = new_axes(ax)
+        for P in self._members():
+            P.plot(ax=ax, dims=dims, **kw)
+        return ax
+
+    def _state(self) -> dict[str, Any]:
+        n = self.dim
+        A = np.vstack([P.A for P in self.polytopes]) if self.polytopes else np.zeros((0, n))
+        b = np.concatenate([P.b for P in self.polytopes]) if self.polytopes else np.zeros(0)
+        counts = np.array([P.n_constraints for P in self.polytopes], dtype=np.int64)
+        return {"A": A, "b": b, "counts": counts, "dim": int(n)}
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> PolytopeUnion:
+        n = int(state["dim"])
+        A = np.asarray(state["A"], dtype=float).reshape(-1, n)
+        b = np.asarray(state["b"], dtype=float).ravel()
+        counts = np.asarray(state["counts"], dtype=np.int64).ravel()
+        ends = np.cumsum(counts)
+        starts = ends - counts
+        return cls([Polytope(A[s:e], b[s:e]) for s, e in zip(starts, ends, strict=True)],
+                   dim=n)
+
     def __repr__(self) -> str:
         return f"PolytopeUnion(dim={self.dim}, polytopes={len(self.polytopes)})"
+
+
+# ===================================================== the covering engine
+def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
+               hard: list[tuple[np.ndarray, np.ndarray]] | None = None,
+               tol: float | None = None) -> list[np.ndarray | None]:
+    """For each region, a point of ``region \\ ∪ members`` (deep by ``> tol``) or None.
+
+    Parameters
+    ----------
+    members : list of Polytope
+        Non-empty polytopes.
+    boxes : ndarray, shape (K, n, 2)
+        The regions (or boxes containing them when ``hard`` is given).
+    centres : ndarray, shape (K, n)
+        A point of each region (returned when no member meets the region).
+    hard : list of (A, b), optional
+        Extra rows of each region (unit rows), e.g. a polytope inside its bounding box.
+    tol : float, optional
+        Decision tolerance; default the largest tolerance of the members and boxes.
+
+    Returns
+    -------
+    list of (ndarray (n,) or None)
+    """
+    K, n = boxes.shape[0], boxes.shape[1]
+    if hard is None:
+        hard = [(np.zeros((0, n)), np.zeros(0))] * K
+    if tol is None:
+        fin = np.abs(boxes[np.isfinite(boxes)])
+        tols = [P._rows().tol for P in members]
+        tol = max([RTOL * max(1.0, float(fin.max(initial=0.0)))] + tols)
+    # pieces: parallel lists (region index, soft rows, soft rhs, a point of the piece)
+    piece_k: list[int] = list(range(K))
+    piece_A: list[np.ndarray] = [np.zeros((0, n))] * K
+    piece_b: list[np.ndarray] = [np.zeros(0)] * K
+    piece_c: list[np.ndarray] = [centres[k] for k in range(K)]
+    for P in members:
+        if not piece_k:
+            break
+        PR = P._rows()
+        kern = P._kernel()
+        ks = np.array(sorted(set(piece_k)))
+        relevant = ~kern.holds(boxes[ks])  # the half-space of row j may miss a point
+        separated = kern.separates(boxes[ks])
+        pos = {k: i for i, k in enumerate(ks.tolist())}
+        new_k: list[int] = []
+        new_A: list[np.ndarray] = []
+        new_b: list[np.ndarray] = []
+        kept = ([], [], [], [])
+        for k, A_p, b_p, c_p in zip(piece_k, piece_A, piece_b, piece_c, strict=True):
+            i = pos[k]
+            if separated[i]:
+                for lst, v in zip(kept, (k, A_p, b_p, c_p), strict=True):
+                    lst.append(v)
+                continue
+            J = np.flatnonzero(relevant[i])
+            for t, j in enumerate(J.tolist()):
+                new_k.append(k)
+                new_A.append(np.vstack([A_p, -PR.An[[j]], PR.An[J[:t]]]))
+                new_b.append(np.concatenate([b_p, -PR.bn[[j]], PR.bn[J[:t]]]))
+        if new_k:
+            r, X = _chebyshev_pieces(new_A, new_b, [hard[k] for k in new_k], boxes[new_k],
+                                     tol)
+            for idx in np.flatnonzero(r > tol).tolist():
+                for lst, v in zip(kept, (new_k[idx], new_A[idx], new_b[idx], X[idx]),
+                                  strict=True):
+                    lst.append(v)
+        piece_k, piece_A, piece_b, piece_c = (list(x) for x in kept)
+    out: list[np.ndarray | None] = [None] * K
+    for k, c in zip(piece_k, piece_c, strict=True):
+        if out[k] is None:
+            out[k] = np.asarray(c, dtype=float)
+    return out
+
+
+def _chebyshev_pieces(As: list[np.ndarray], bs: list[np.ndarray],
+                      hard: list[tuple[np.ndarray, np.ndarray]], boxes: np.ndarray,
+                      tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stacked LPs ``max r`` s.t. ``a.x + r <= b`` (soft unit rows), hard rows ``h.x <= g``,
+    ``x`` in the box, ``r <= max(1, 1000 tol)``; returns the optima r and the points x."""
+    K = len(As)
+    n = boxes.shape[1]
+    blocks = []
+    rhs = []
+    sizes = []
+    for A, b, (H, g) in zip(As, bs, hard, strict=True):
+        blocks.append(np.hstack([A, np.ones((A.shape[0], 1))]))
+        rhs.append(b)
+        if H.shape[0]:
+            blocks.append(np.hstack([H, np.zeros((H.shape[0], 1))]))
+            rhs.append(g)
+        sizes.append(A.shape[0] + H.shape[0])
+    C = np.zeros((K, n + 1))
+    C[:, -1] = -1.0
+    lb = np.hstack([boxes[..., 0], np.full((K, 1), -np.inf)])
+    ub = np.hstack([boxes[..., 1], np.full((K, 1), max(1.0, 1e3 * tol))])
+    res = _lp.block_lp(C, np.vstack(blocks), np.concatenate(rhs),
+                       np.repeat(np.arange(K), sizes), lb, ub)
+    _lp.check_status(res.status, "a covering test")
+    r = np.where(res.status == _lp.OPTIMAL, res.x[:, -1], -np.inf)
+    return r, res.x[:, :n]
