@@ -49,6 +49,7 @@ _BINARY = {
 _DISCONTINUOUS = {
     ca.OP_FLOOR, ca.OP_CEIL, ca.OP_SIGN, ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT,
     ca.OP_AND, ca.OP_OR, ca.OP_IF_ELSE_ZERO, ca.OP_FMOD, ca.OP_REMAINDER, ca.OP_COPYSIGN,
+    ca.OP_ATAN2,  # jumps by 2 pi across the negative x axis
 }
 
 
@@ -85,8 +86,9 @@ def _as_sx_function(fun: Any) -> ca.Function:
 class _Codegen:
     """Generate the straight-line numpy source for one SX Function."""
 
-    def __init__(self, fun: ca.Function) -> None:
+    def __init__(self, fun: ca.Function, widen: frozenset[int] = frozenset()) -> None:
         self.fun = fun
+        self.widen = widen  # instruction indices of constants to widen (derived constants)
         self.lines: list[str] = []
         self.consts: dict[int, tuple[float, float]] = {}  # slot -> folded constant interval
         self.const_table: list[float] = []
@@ -147,7 +149,11 @@ class _Codegen:
             outs = list(f.instruction_output(k))
             if op == ca.OP_CONST:
                 v = float(f.instruction_constant(k))
-                self.consts[outs[0]] = (v, v)
+                if k in self.widen and v != 0.0:
+                    lo, hi = _widen_constant(v)
+                    self.consts[outs[0]] = (lo, hi)
+                else:
+                    self.consts[outs[0]] = (v, v)
             elif op == ca.OP_INPUT:
                 self.consts.pop(outs[0], None)
                 self.lines.append(
@@ -208,6 +214,9 @@ class _Codegen:
 class InclusionFunction:
     """A batched interval inclusion function compiled from a CasADi SX Function.
 
+    Large batches are evaluated in chunks of :attr:`chunk` boxes (default 8192), which keeps
+    the numpy temporaries in cache.
+
     Call it with one box array per input of the Function: ``(N, d_i, 2)`` (or one ``(d_i, 2)``
     box, or a :class:`~casadi_cmpc.Box`). Inputs with ``N = 1`` broadcast against the others.
     Returns a list with one ``(N, d_o, 2)`` array per output, where ``d_i``/``d_o`` are the
@@ -232,6 +241,8 @@ class InclusionFunction:
     source : str
         The generated numpy source (natural evaluator), for inspection.
     """
+
+    chunk: int = 8192
 
     def __init__(self, fun: ca.Function, kind: str = "natural") -> None:
         kind = str(kind).lower()
@@ -301,7 +312,8 @@ class InclusionFunction:
     def _build_centered(self) -> None:
         """One SX Function G(z_mid..., z_box...) -> [f(z_mid)..., J(z_box), f(z_box)...].
 
-        Common subexpressions of f and its Jacobian over the box are shared (casadi.cse).
+        The Jacobian's expressions share the nodes of f(z_box), so their common
+        subexpressions are evaluated once.
         """
         f = self.fun
         zm = [ca.SX.sym(f"m{i}", f.sparsity_in(i)) for i in range(self.n_in)]
@@ -311,9 +323,14 @@ class InclusionFunction:
         outs_b = f.call(zb)
         y = ca.vertcat(*[ca.vec(o) for o in outs_b])
         jac = ca.jacobian(y, z)
-        exprs = ca.cse(list(outs_m) + [jac] + list(outs_b))
-        g = ca.Function(f"{f.name()}_centered", zm + zb, exprs)
-        self._g_eval, self._g_source = _compile(g)
+        # The f(z_mid) and f(z_box) parts re-evaluate f's own instructions on fresh symbols,
+        # which reproduces its constants; the Jacobian shares their nodes. Constants that only
+        # the Jacobian uses were created (and possibly folded) by differentiation: widened.
+        g = ca.Function(f"{f.name()}_centered", zm + zb, list(outs_m) + [jac] + list(outs_b),
+                        {"live_variables": False})
+        k = self.n_out
+        widen = _derived_constants(g, [i for i in range(g.n_out()) if i != k])
+        self._g_eval, self._g_source = _compile(g, widen)
         self._g_nnz = [g.nnz_out(i) for i in range(g.n_out())]
         rows, cols = jac.sparsity().get_triplet()
         # row offsets of each output inside y, and nonzero rows of each output
@@ -343,8 +360,13 @@ class InclusionFunction:
         # S_r = sum_j mag(J_rj) * rad_j, rounded up (J (Z - m) is inside [-S, S])
         spread: dict[int, Any] = {}
         for t, (jl, jh) in enumerate(jac):
+            r_j = rad[self._jac_cols[t]]
             with np.errstate(all="ignore"):
-                term = arith.upm(np.maximum(-jl, jh) * rad[self._jac_cols[t]])
+                term = arith.upm(np.maximum(-jl, jh) * r_j)
+            if np.isnan(term).any():
+                # a coordinate that does not vary contributes nothing (even where J is
+                # unbounded); elsewhere a NaN slope means no information
+                term = np.where(r_j == 0, 0.0, np.where(np.isnan(term), np.inf, term))
             r = int(self._jac_rows[t])
             spread[r] = term if r not in spread else arith.up(spread[r] + term)
         res: list[list[Any]] = []
@@ -365,9 +387,20 @@ class InclusionFunction:
 
     def __call__(self, *args: Any) -> list[np.ndarray]:
         boxes, n = self._inputs(args)
-        if self.kind == "natural" or self.centered_fallback:
-            return self._natural(boxes, n)
-        return self._centered(boxes, n)
+        run = self._natural if (self.kind == "natural" or self.centered_fallback) \
+            else self._centered
+        step = int(self.chunk)
+        if n <= step:
+            return run(boxes, n)
+        # Evaluate in chunks: the temporaries of a chunk stay in cache, which is several
+        # times faster than whole-batch numpy operations on large arrays.
+        outs = [np.empty((n, d, 2)) for d in self.size_out]
+        for i in range(0, n, step):
+            j = min(i + step, n)
+            part = [b if b.shape[0] == 1 else b[i:j] for b in boxes]
+            for o, r in zip(outs, run(part, j - i), strict=True):
+                o[i:j] = r
+        return outs
 
     def __repr__(self) -> str:
         return (f"InclusionFunction('{self.fun.name()}', kind='{self.kind}', "
@@ -382,8 +415,41 @@ def _sanitize(out: np.ndarray) -> None:
         out[..., 1][nan[..., 1]] = np.inf
 
 
-def _compile(fun: ca.Function) -> tuple[Callable[..., None], str]:
-    gen = _Codegen(fun)
+# Relative widening of constants that CasADi created while differentiating (it folds constant
+# subexpressions such as 1/3 or 0.1 - 1 in floating point): covers a few roundings.
+DERIVED_CONST_REL = 2.0 ** -40
+
+
+def _widen_constant(v: float) -> tuple[float, float]:
+    m = abs(v) * DERIVED_CONST_REL + arith.ABS_LIBM
+    return v - m, v + m
+
+
+def _derived_constants(g: ca.Function, exact_outputs: Sequence[int]) -> frozenset[int]:
+    """Instructions of ``g`` (built with live_variables=False) that load a constant not used by
+    any of ``exact_outputs``: constants that exist only in the derived (Jacobian) outputs."""
+    needed: set[int] = set()
+    n = g.n_instructions()
+    ids = [g.instruction_id(k) for k in range(n)]
+    exact = set(exact_outputs)
+    for k in range(n - 1, -1, -1):
+        op = ids[k]
+        if op == ca.OP_OUTPUT:
+            if g.instruction_output(k)[0] in exact:
+                needed.add(g.instruction_input(k)[0])
+            continue
+        outs = g.instruction_output(k)
+        if op in (ca.OP_CONST, ca.OP_INPUT):
+            continue
+        if outs and outs[0] in needed:
+            needed.update(g.instruction_input(k))
+    return frozenset(k for k in range(n) if ids[k] == ca.OP_CONST
+                     and g.instruction_output(k)[0] not in needed)
+
+
+def _compile(fun: ca.Function,
+             widen: frozenset[int] = frozenset()) -> tuple[Callable[..., None], str]:
+    gen = _Codegen(fun, widen)
     src = gen.build()
     namespace: dict[str, Any] = {"_A": arith, "_K": gen.const_table, "np": np}
     exec(compile(src, f"<interval:{fun.name()}>", "exec"), namespace)  # noqa: S102
