@@ -409,12 +409,16 @@ def fmod(al, ah, bl, bh):
 
 
 def remainder(al, ah, bl, bh):
-    """IEEE remainder(x, y): x itself when |x| <= |y|/2, else magnitude at most |y|/2."""
+    """IEEE remainder(x, y): x itself when |x| <= |y|/2, else magnitude at most
+    min(|x|, |y|/2), of either sign (remainder(2, 3) = -1)."""
     ml, mh = fabs(bl, bh)
-    half = mh * 0.5
-    inside = (al >= -0.5 * ml) & (ah <= 0.5 * ml)
-    lo = _where(inside, al, _max(-half, al))
-    hi = _where(inside, ah, _min(half, ah))
+    xm = _max(-al, ah)  # max |x|
+    with np.errstate(all="ignore"):
+        half = mh * 0.5 + TINY  # >= |y|/2 also when the halving rounds (subnormal y)
+        inside = (-2.0 * al <= ml) & (2.0 * ah <= ml)  # exact doubling, no rounded halving
+    bound = _min(half, xm)
+    lo = _where(inside, al, -bound)
+    hi = _where(inside, ah, bound)
     lo = _where(np.isnan(al) | np.isnan(ah), np.nan, lo)
     return _whole_where((bl <= 0) & (bh >= 0), lo, hi)
 
@@ -463,11 +467,9 @@ def powi(al, ah, n: int):
     if n < 0:
         pl, ph = powi(al, ah, -n)
         return inv(pl, ph)
-    with np.errstate(all="ignore"):
-        pa = np.power(al, n)
-        pb = np.power(ah, n)
     if n % 2 == 1:
-        return dnf(pa), upf(pb)
+        with np.errstate(all="ignore"):  # overflow: inf - inf is NaN (no information)
+            return dnf(np.power(al, n)), upf(np.power(ah, n))
     ml, mh = fabs(al, ah)
     with np.errstate(all="ignore"):
         lo = _max(dnf(np.power(ml, n)), 0.0)
@@ -497,6 +499,9 @@ def pow(al, ah, bl, bh):
     ll, lh = log(al, ah)
     pl, ph = mul(ll, lh, bl, bh)
     lo, hi = exp(pl, ph)
+    # x partly negative, or 0 in x with a negative exponent: partly outside the domain (and
+    # negative values are reached at integer y), so the whole line
+    lo, hi = _whole_where(((al < 0) & (ah >= 0)) | ((al <= 0) & (ah >= 0) & (bl < 0)), lo, hi)
     lo = np.array(np.broadcast_to(lo, shape))
     hi = np.array(np.broadcast_to(hi, shape))
     if np.any(thin_int):
