@@ -220,7 +220,7 @@ class Model:
     def function(self) -> ca.Function:
         """CasADi Function ``f(x, u, w) -> x_next`` (``w`` of size 0 without disturbance)."""
         return self._cached("function", lambda: ca.Function(
-            f"{self.name}_f", [self.x, self.u, self._w_sym], [ca.cse(self.f)],
+            f"{self.name}_f", [self.x, self.u, self._w_sym], [self.f],
             ["x", "u", "w"], ["x_next"]))
 
     def jacobian_function(self, wrt: str) -> ca.Function:
@@ -231,7 +231,7 @@ class Model:
         def build() -> ca.Function:
             jac = ca.densify(ca.jacobian(self.f, sym))
             return ca.Function(f"{self.name}_jac_{wrt}", [self.x, self.u, self._w_sym],
-                               [ca.cse(jac)], ["x", "u", "w"], [f"df_d{wrt}"])
+                               [jac], ["x", "u", "w"], [f"df_d{wrt}"])
 
         return self._cached(("jacfun", wrt), build)
 
@@ -301,8 +301,18 @@ class Model:
             (used by zonotope evolution, thesis Thm 4.3/4.4).
         """
         wrt = _check_wrt(wrt)
-        F = self._cached(("jac_inclusion", wrt, kind),
-                         lambda: InclusionFunction(self.jacobian_function(wrt), kind))
+
+        def build() -> InclusionFunction:
+            # [df/dwrt, f] in one Function: constants used only by the derivative were created
+            # (and possibly folded in floating point) by differentiation and are widened
+            sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
+            jac = ca.densify(ca.jacobian(self.f, sym))
+            g = ca.Function(f"{self.name}_jac_{wrt}", [self.x, self.u, self._w_sym],
+                            [jac, self.f], ["x", "u", "w"], [f"df_d{wrt}", "x_next"],
+                            {"live_variables": False})
+            return InclusionFunction(g, kind, derived_outputs=(0,), evaluate=(0,))
+
+        F = self._cached(("jac_inclusion", wrt, kind), build)
         d = {"x": self.n, "u": self.m, "w": self.l}[wrt]
         n = self.n
 

@@ -23,18 +23,22 @@ Exact operations (negation, doubling, ``fabs``, ``floor``, ``ceil``, ``sign``, `
 
 Domains and undefined results
 -----------------------------
-* Division by an interval containing 0, ``inv`` of such an interval, ``tan`` over a pole,
-  and any function on an interval that is only **partly** inside its domain (``log``,
-  ``sqrt``, ``asin``, ``acos``, ``acosh``, ``atanh``, ``erfinv``, real powers) return the
-  whole real line ``[-inf, inf]``.
-* An interval entirely outside the domain gives ``[nan, nan]``.
-* A NaN bound means *no information*: NaN propagates through every operation here (numpy's
-  ``minimum``/``maximum`` propagate it, and every case test is written so that NaN falls into
-  the "unknown" branch). Compiled inclusion functions replace NaN bounds by ``-inf``/``+inf``
-  on output, so callers never see NaN.
+* Where an operation may be undefined somewhere on its operand box — division by an interval
+  containing 0 (also ``inv``, ``fmod``, ``remainder``), ``tan`` over a pole, and any function
+  on an interval that is not entirely inside its domain (``log``, ``sqrt``, ``asin``,
+  ``acos``, ``acosh``, ``atanh``, ``erfinv``, real powers) — the result is ``[nan, nan]``.
+* A NaN bound means *possibly undefined, no information*. NaN propagates through every
+  operation here, including the bounded ones (``atan``, ``tanh``, comparisons, ``if_else``,
+  multiplication by 0), so a composite function that may be undefined somewhere on a box
+  gives NaN, not a deceptively bounded result. Compiled inclusion functions replace NaN
+  bounds by ``-inf``/``+inf`` on output, so callers see the whole real line and never NaN.
 
 This is deliberately never narrower than the true range over the whole box: a box containing
-points where the function is undefined cannot be certified by any predicate.
+points where the function may be undefined cannot be certified by any predicate.
+
+Floating-point exceptions (overflow, invalid) are expected here and are not reported: callers
+that evaluate many operations wrap them in one ``np.errstate(all="ignore")`` (the compiled
+evaluators and :mod:`~casadi_cmpc.interval.ops` do).
 """
 
 from __future__ import annotations
@@ -81,6 +85,37 @@ def upm(x):
     return x + (_abs(x) * U + TINY)
 
 
+def _dn_(x):
+    """In-place :func:`dn` of a freshly computed array (or scalar) owned by the caller."""
+    t = _abs(x)
+    t *= U
+    x -= t
+    return x
+
+
+def _up_(x):
+    t = _abs(x)
+    t *= U
+    x += t
+    return x
+
+
+def _dnm_(x):
+    t = _abs(x)
+    t *= U
+    t += TINY
+    x -= t
+    return x
+
+
+def _upm_(x):
+    t = _abs(x)
+    t *= U
+    t += TINY
+    x += t
+    return x
+
+
 def dnf(x):
     """Round a libm result down."""
     return x - (_abs(x) * REL_LIBM + ABS_LIBM)
@@ -91,12 +126,20 @@ def upf(x):
     return x + (_abs(x) * REL_LIBM + ABS_LIBM)
 
 
-def _whole_where(mask, lo, hi):
-    """Set [-inf, inf] where mask is True."""
+def _undefined_where(mask, lo, hi):
+    """Set [nan, nan] (possibly undefined, no information) where mask is True."""
     if np.any(mask):
-        lo = _where(mask, -INF, lo)
-        hi = _where(mask, INF, hi)
+        lo = _where(mask, np.nan, lo)
+        hi = _where(mask, np.nan, hi)
     return lo, hi
+
+
+def _keep_nan(lo, hi, *operands):
+    """Make the result NaN wherever an operand bound is NaN (for case-based operations)."""
+    bad = np.isnan(operands[0])
+    for o in operands[1:]:
+        bad = bad | np.isnan(o)
+    return _nan_where(bad, lo, hi)
 
 
 def _nan_where(mask, lo, hi):
@@ -109,14 +152,11 @@ def _nan_where(mask, lo, hi):
 def _domain(xl, xh, dlo, dhi, lo, hi, open_lo=False, open_hi=False):
     """Apply the domain convention for a function defined on [dlo, dhi] (or open ends).
 
-    Entirely outside -> NaN; partly outside -> whole line. NaN inputs stay NaN.
+    Not entirely inside the domain -> NaN (possibly undefined). NaN inputs stay NaN.
     """
     below_part = (xl <= dlo) if open_lo else (xl < dlo)
     above_part = (xh >= dhi) if open_hi else (xh > dhi)
-    outside_all = ((xh <= dlo) if open_lo else (xh < dlo)) | (
-        (xl >= dhi) if open_hi else (xl > dhi))
-    lo, hi = _whole_where(below_part | above_part, lo, hi)
-    return _nan_where(outside_all, lo, hi)
+    return _undefined_where(below_part | above_part, lo, hi)
 
 
 def _mono_inc(fn, xl, xh, rlo=-INF, rhi=INF):
@@ -144,25 +184,21 @@ def _mono_dec(fn, xl, xh, rlo=-INF, rhi=INF):
 
 # ------------------------------------------------------------------------- arithmetic
 def add(al, ah, bl, bh):
-    with np.errstate(all="ignore"):
-        return dn(al + bl), up(ah + bh)
+    return _dn_(al + bl), _up_(ah + bh)
 
 
 def sub(al, ah, bl, bh):
-    with np.errstate(all="ignore"):
-        return dn(al - bh), up(ah - bl)
+    return _dn_(al - bh), _up_(ah - bl)
 
 
 def addc(al, ah, c):
     """x + c for a float constant c."""
-    with np.errstate(all="ignore"):
-        return dn(al + c), up(ah + c)
+    return _dn_(al + c), _up_(ah + c)
 
 
 def csub(c, bl, bh):
     """c - x for a float constant c."""
-    with np.errstate(all="ignore"):
-        return dn(c - bh), up(c - bl)
+    return _dn_(c - bh), _up_(c - bl)
 
 
 def neg(al, ah):
@@ -174,27 +210,39 @@ def twice(al, ah):
 
 
 def mul(al, ah, bl, bh):
-    with np.errstate(all="ignore"):
-        p1 = al * bl
-        p2 = al * bh
-        p3 = ah * bl
-        p4 = ah * bh
-        lo = _min(_min(p1, p2), _min(p3, p4))
-        hi = _max(_max(p1, p2), _max(p3, p4))
-        return dnm(lo), upm(hi)
+    p1 = al * bl
+    p2 = al * bh
+    p3 = ah * bl
+    p4 = ah * bh
+    lo = _min(p1, p2)
+    lo = _min(lo, _min(p3, p4), out=lo) if isinstance(lo, np.ndarray) else _min(
+        lo, _min(p3, p4))
+    hi = _max(p1, p2)
+    hi = _max(hi, _max(p3, p4), out=hi) if isinstance(hi, np.ndarray) else _max(
+        hi, _max(p3, p4))
+    return _dnm_(lo), _upm_(hi)
 
 
 def mulc(al, ah, c):
     """x * c for a float constant c (exact real constant)."""
-    with np.errstate(all="ignore"):
-        if c > 0:
-            return dnm(al * c), upm(ah * c)
-        if c < 0:
-            return dnm(ah * c), upm(al * c)
-        if c == 0:
-            z = np.zeros(np.broadcast(al, ah).shape)
-            return z, z.copy()
-        return np.full_like(al, np.nan), np.full_like(ah, np.nan)
+    if c > 0:
+        return _dnm_(al * c), _upm_(ah * c)
+    if c < 0:
+        return _dnm_(ah * c), _upm_(al * c)
+    shape = np.broadcast(al, ah).shape
+    if c == 0:  # 0 * x = 0 for every real x; NaN (possibly undefined) stays NaN
+        z = np.zeros(shape)
+        return _keep_nan(z, z.copy(), al, ah)
+    return np.full(shape, np.nan), np.full(shape, np.nan)
+
+
+def mulci(al, ah, cl, ch):
+    """x * [cl, ch] for a constant interval of one sign (0 < cl <= ch or cl <= ch < 0)."""
+    if cl > 0:
+        return _dnm_(_min(al * cl, al * ch)), _upm_(_max(ah * cl, ah * ch))
+    if ch < 0:
+        return _dnm_(_min(ah * cl, ah * ch)), _upm_(_max(al * cl, al * ch))
+    return mul(al, ah, cl, ch)
 
 
 def sq(al, ah):
@@ -205,35 +253,32 @@ def sq(al, ah):
 
 
 def div(al, ah, bl, bh):
-    with np.errstate(all="ignore"):
-        q1 = al / bl
-        q2 = al / bh
-        q3 = ah / bl
-        q4 = ah / bh
-        lo = dnm(_min(_min(q1, q2), _min(q3, q4)))
-        hi = upm(_max(_max(q1, q2), _max(q3, q4)))
-    return _whole_where((bl <= 0) & (bh >= 0), lo, hi)
+    q1 = al / bl
+    q2 = al / bh
+    q3 = ah / bl
+    q4 = ah / bh
+    lo = _dnm_(_min(_min(q1, q2), _min(q3, q4)))
+    hi = _upm_(_max(_max(q1, q2), _max(q3, q4)))
+    return _undefined_where((bl <= 0) & (bh >= 0), lo, hi)
 
 
 def divc(al, ah, c):
     """x / c for a float constant c."""
-    with np.errstate(all="ignore"):
-        if c > 0:
-            return dnm(al / c), upm(ah / c)
-        if c < 0:
-            return dnm(ah / c), upm(al / c)
+    if c > 0:
+        return _dnm_(al / c), _upm_(ah / c)
+    if c < 0:
+        return _dnm_(ah / c), _upm_(al / c)
     shape = np.broadcast(al, ah).shape
-    return np.full(shape, -INF), np.full(shape, INF)
+    return np.full(shape, np.nan), np.full(shape, np.nan)
 
 
 def cdiv(c, bl, bh):
     """c / x for a float constant c."""
-    with np.errstate(all="ignore"):
-        q1 = c / bl
-        q2 = c / bh
-        lo = dnm(_min(q1, q2))
-        hi = upm(_max(q1, q2))
-    return _whole_where((bl <= 0) & (bh >= 0), lo, hi)
+    q1 = c / bl
+    q2 = c / bh
+    lo = _dnm_(_min(q1, q2))
+    hi = _upm_(_max(q1, q2))
+    return _undefined_where((bl <= 0) & (bh >= 0), lo, hi)
 
 
 def inv(al, ah):
@@ -305,7 +350,7 @@ def tan(al, ah):
     lo, hi = _mono_inc(np.tan, al, ah)
     pole = ((ah - al) >= PI_LO) | _contains_point(al, ah, 0.5 * PI_LO, PI_LO)
     pole |= (_abs(al) > _SIN_SAFE) | (_abs(ah) > _SIN_SAFE)
-    return _whole_where(pole, lo, hi)
+    return _undefined_where(pole, lo, hi)
 
 
 def asin(al, ah):
@@ -390,8 +435,7 @@ def copysign(al, ah, bl, bh):
     negv = bh < 0
     lo = _where(pos, ml, _where(negv, -mh, -mh))
     hi = _where(pos, mh, _where(negv, -ml, mh))
-    lo = _where(np.isnan(bl) | np.isnan(bh), np.nan, lo)
-    return lo, hi
+    return _keep_nan(lo, hi, al, ah, bl, bh)
 
 
 def fmod(al, ah, bl, bh):
@@ -404,8 +448,8 @@ def fmod(al, ah, bl, bh):
         hi = _where(ah <= 0, 0.0, _min(ah, mh))
     lo = _where(xl_in | xn_in, al, lo)
     hi = _where(xl_in | xn_in, ah, hi)
-    lo = _where(np.isnan(al) | np.isnan(ah), np.nan, lo)
-    return _whole_where((bl <= 0) & (bh >= 0), lo, hi)
+    lo, hi = _keep_nan(lo, hi, al, ah, bl, bh)
+    return _undefined_where((bl <= 0) & (bh >= 0), lo, hi)
 
 
 def remainder(al, ah, bl, bh):
@@ -419,8 +463,8 @@ def remainder(al, ah, bl, bh):
     bound = _min(half, xm)
     lo = _where(inside, al, -bound)
     hi = _where(inside, ah, bound)
-    lo = _where(np.isnan(al) | np.isnan(ah), np.nan, lo)
-    return _whole_where((bl <= 0) & (bh >= 0), lo, hi)
+    lo, hi = _keep_nan(lo, hi, al, ah, bl, bh)
+    return _undefined_where((bl <= 0) & (bh >= 0), lo, hi)
 
 
 def hypot(al, ah, bl, bh):
@@ -457,8 +501,8 @@ def powi(al, ah, n: int):
     """x**n for an integer n."""
     n = int(n)
     shape = np.broadcast(al, ah).shape
-    if n == 0:
-        return np.ones(shape), np.ones(shape)
+    if n == 0:  # x**0 = 1 for every real x; NaN (possibly undefined) stays NaN
+        return _keep_nan(np.ones(shape), np.ones(shape), al, ah)
     if n == 1:
         lo, hi = np.broadcast_arrays(al, ah)
         return lo.copy(), hi.copy()
@@ -501,7 +545,7 @@ def pow(al, ah, bl, bh):
     lo, hi = exp(pl, ph)
     # x partly negative, or 0 in x with a negative exponent: partly outside the domain (and
     # negative values are reached at integer y), so the whole line
-    lo, hi = _whole_where(((al < 0) & (ah >= 0)) | ((al <= 0) & (ah >= 0) & (bl < 0)), lo, hi)
+    lo, hi = _undefined_where(((al < 0) & (ah >= 0)) | ((al <= 0) & (ah >= 0) & (bl < 0)), lo, hi)
     lo = np.array(np.broadcast_to(lo, shape))
     hi = np.array(np.broadcast_to(hi, shape))
     if np.any(thin_int):
@@ -523,19 +567,21 @@ def _bool_interval(true_sure, false_sure):
 
 
 def lt(al, ah, bl, bh):
-    return _bool_interval(ah < bl, al >= bh)
+    return _keep_nan(*_bool_interval(ah < bl, al >= bh), al, ah, bl, bh)
 
 
 def le(al, ah, bl, bh):
-    return _bool_interval(ah <= bl, al > bh)
+    return _keep_nan(*_bool_interval(ah <= bl, al > bh), al, ah, bl, bh)
 
 
 def eq(al, ah, bl, bh):
-    return _bool_interval((al == ah) & (bl == bh) & (al == bl), (ah < bl) | (al > bh))
+    return _keep_nan(*_bool_interval((al == ah) & (bl == bh) & (al == bl),
+                                     (ah < bl) | (al > bh)), al, ah, bl, bh)
 
 
 def ne(al, ah, bl, bh):
-    return _bool_interval((ah < bl) | (al > bh), (al == ah) & (bl == bh) & (al == bl))
+    return _keep_nan(*_bool_interval((ah < bl) | (al > bh),
+                                     (al == ah) & (bl == bh) & (al == bl)), al, ah, bl, bh)
 
 
 def _nonzero_sure(al, ah):
@@ -547,17 +593,19 @@ def _zero_sure(al, ah):
 
 
 def not_(al, ah):
-    return _bool_interval(_zero_sure(al, ah), _nonzero_sure(al, ah))
+    return _keep_nan(*_bool_interval(_zero_sure(al, ah), _nonzero_sure(al, ah)), al, ah)
 
 
 def and_(al, ah, bl, bh):
-    return _bool_interval(_nonzero_sure(al, ah) & _nonzero_sure(bl, bh),
-                          _zero_sure(al, ah) | _zero_sure(bl, bh))
+    return _keep_nan(*_bool_interval(_nonzero_sure(al, ah) & _nonzero_sure(bl, bh),
+                                     _zero_sure(al, ah) | _zero_sure(bl, bh)),
+                     al, ah, bl, bh)
 
 
 def or_(al, ah, bl, bh):
-    return _bool_interval(_nonzero_sure(al, ah) | _nonzero_sure(bl, bh),
-                          _zero_sure(al, ah) & _zero_sure(bl, bh))
+    return _keep_nan(*_bool_interval(_nonzero_sure(al, ah) | _nonzero_sure(bl, bh),
+                                     _zero_sure(al, ah) & _zero_sure(bl, bh)),
+                     al, ah, bl, bh)
 
 
 def if_else_zero(cl, ch, xl, xh):
@@ -566,7 +614,7 @@ def if_else_zero(cl, ch, xl, xh):
     zero = _zero_sure(cl, ch)
     lo = _where(sure, xl, _where(zero, 0.0, _min(xl, 0.0)))
     hi = _where(sure, xh, _where(zero, 0.0, _max(xh, 0.0)))
-    return lo, hi
+    return _keep_nan(lo, hi, cl, ch, xl, xh)
 
 
 def assign(al, ah):

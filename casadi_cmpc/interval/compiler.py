@@ -89,6 +89,8 @@ class _Codegen:
     def __init__(self, fun: ca.Function, widen: frozenset[int] = frozenset()) -> None:
         self.fun = fun
         self.widen = widen  # instruction indices of constants to widen (derived constants)
+        self.only: set[int] | None = None  # instructions to emit (None: all)
+        self.out_map: dict[int, int] | None = None  # Function output -> evaluator output
         self.lines: list[str] = []
         self.consts: dict[int, tuple[float, float]] = {}  # slot -> folded constant interval
         self.const_table: list[float] = []
@@ -111,6 +113,10 @@ class _Codegen:
             return c[0]
         return None
 
+    def _signed_const(self, slot: int) -> bool:
+        c = self.consts.get(slot)
+        return c is not None and (c[0] > 0 or c[1] < 0) and bool(np.isfinite(c).all())
+
     def _emit(self, out: int, expr: str) -> None:
         self.consts.pop(out, None)
         self.lines.append(f"    l{out}, h{out} = {expr}")
@@ -120,7 +126,8 @@ class _Codegen:
         args = []
         for s in ins:
             args.extend(np.array([v]) for v in self.consts[s])
-        lo, hi = fn(*args)
+        with np.errstate(all="ignore"):
+            lo, hi = fn(*args)
         lo = float(np.asarray(lo).reshape(-1)[0])
         hi = float(np.asarray(hi).reshape(-1)[0])
         if np.isnan(lo):
@@ -144,6 +151,8 @@ class _Codegen:
     def build(self) -> str:
         f = self.fun
         for k in range(f.n_instructions()):
+            if self.only is not None and k not in self.only:
+                continue
             op = f.instruction_id(k)
             ins = list(f.instruction_input(k))
             outs = list(f.instruction_output(k))
@@ -160,7 +169,8 @@ class _Codegen:
                     f"    l{outs[0]} = IL[{ins[0]}][{ins[1]}]; h{outs[0]} = IH[{ins[0]}][{ins[1]}]")
             elif op == ca.OP_OUTPUT:
                 lo, hi = self._operand(ins[0])
-                self.lines.append(f"    O[{outs[0]}][{outs[1]}] = ({lo}, {hi})")
+                oi = outs[0] if self.out_map is None else self.out_map[outs[0]]
+                self.lines.append(f"    O[{oi}][{outs[1]}] = ({lo}, {hi})")
             elif op in _UNARY:
                 name = _UNARY[op]
                 if ins[0] in self.consts:
@@ -193,6 +203,10 @@ class _Codegen:
                         expr = f"_A.mulc({a[0]}, {a[1]}, {self._lit(c1)})"
                     elif c0 is not None:
                         expr = f"_A.mulc({b[0]}, {b[1]}, {self._lit(c0)})"
+                    elif self._signed_const(i1):
+                        expr = f"_A.mulci({a[0]}, {a[1]}, {b[0]}, {b[1]})"
+                    elif self._signed_const(i0):
+                        expr = f"_A.mulci({b[0]}, {b[1]}, {a[0]}, {a[1]})"
                 elif op == ca.OP_DIV:
                     if c1 is not None:
                         expr = f"_A.divc({a[0]}, {a[1]}, {self._lit(c1)})"
@@ -214,8 +228,9 @@ class _Codegen:
 class InclusionFunction:
     """A batched interval inclusion function compiled from a CasADi SX Function.
 
-    Large batches are evaluated in chunks of :attr:`chunk` boxes (default 8192), which keeps
-    the numpy temporaries in cache.
+    Large batches are evaluated in chunks of :attr:`chunk` boxes (default 8192 for the natural
+    form, 4096 for the centered one, which has more temporaries), which keeps the numpy
+    temporaries in cache.
 
     Call it with one box array per input of the Function: ``(N, d_i, 2)`` (or one ``(d_i, 2)``
     box, or a :class:`~casadi_cmpc.Box`). Inputs with ``N = 1`` broadcast against the others.
@@ -243,21 +258,35 @@ class InclusionFunction:
     """
 
     chunk: int = 8192
+    chunk_centered: int = 4096
 
-    def __init__(self, fun: ca.Function, kind: str = "natural") -> None:
+    def __init__(self, fun: ca.Function, kind: str = "natural", *,
+                 derived_outputs: Sequence[int] = (), evaluate: Sequence[int] | None = None
+                 ) -> None:
         kind = str(kind).lower()
         if kind not in _KINDS:
             raise ValueError(f"unknown inclusion kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
         fun = _as_sx_function(fun)
+        if derived_outputs or evaluate is not None:
+            if kind != "natural":
+                raise ValueError("derived_outputs/evaluate are for natural inclusions only")
+            fun = _restrict(fun, derived_outputs, evaluate)
+            self._widen = _derived_constants(
+                fun.fun, [i for i in range(fun.fun.n_out()) if i not in derived_outputs])
+            self._keep = fun.keep
+            fun = fun.fun
+        else:
+            self._widen = frozenset()
+            self._keep = None
         self.fun = fun
         self.kind = kind
+        outs = list(range(fun.n_out())) if self._keep is None else list(self._keep)
         self.n_in = fun.n_in()
-        self.n_out = fun.n_out()
+        self.n_out = len(outs)
         self.size_in = [fun.numel_in(i) for i in range(self.n_in)]
-        self.size_out = [fun.numel_out(i) for i in range(self.n_out)]
-        self._out_pos = [np.asarray(fun.sparsity_out(i).find(), dtype=np.intp)
-                         for i in range(self.n_out)]
-        self._eval, self.source = _compile(fun)
+        self.size_out = [fun.numel_out(i) for i in outs]
+        self._out_pos = [np.asarray(fun.sparsity_out(i).find(), dtype=np.intp) for i in outs]
+        self._eval, self.source = _compile(fun, self._widen, self._keep)
         self.centered_fallback = False
         if kind == "centered":
             bad = _discontinuous_ops(fun)
@@ -291,7 +320,8 @@ class InclusionFunction:
         il = [np.ascontiguousarray(b[..., 0].T) for b in boxes]
         ih = [np.ascontiguousarray(b[..., 1].T) for b in boxes]
         o: list[list[Any]] = [[None] * k for k in n_outs]
-        evaluator(il, ih, o)
+        with np.errstate(all="ignore"):
+            evaluator(il, ih, o)
         return o
 
     def _pack(self, o: list[list[Any]], n: int) -> list[np.ndarray]:
@@ -344,44 +374,56 @@ class InclusionFunction:
             off += sp.numel()
 
     def _centered(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
+        with np.errstate(all="ignore"):
+            return self._centered_impl(boxes, n)
+
+    def _centered_impl(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         mids = []
         rads = []
         for b in boxes:
             lo, hi = b[..., 0], b[..., 1]
-            with np.errstate(all="ignore"):
-                m = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-                r = arith.up(np.maximum(m - lo, hi - m))
+            m = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+            r = arith.up(np.maximum(m - lo, hi - m))
             mids.append(np.stack([m, m], axis=-1))
             rads.append(np.ascontiguousarray(r.T))  # (d_i, N_i)
         rad = [row for r in rads for row in r]  # one (N_i,) array per joint coordinate
         o = self._raw(self._g_eval, list(mids) + list(boxes), self._g_nnz)
         k = self.n_out
         fm, jac, fb = o[:k], o[k], o[k + 1:]
-        # S_r = sum_j mag(J_rj) * rad_j, rounded up (J (Z - m) is inside [-S, S])
-        spread: dict[int, Any] = {}
+        # S_r >= sum_j mag(J_rj) * rad_j, so that J (Z - m) lies in [-S, S]. The terms are
+        # non-negative: sum them in floating point and bound all roundings at once,
+        # S = fl(sum fl(t_j)) * (1 + (k + 4) 2^-52) + (k + 1) 2^-1074 for k terms.
+        sums: dict[int, Any] = {}
+        counts: dict[int, int] = {}
         for t, (jl, jh) in enumerate(jac):
             r_j = rad[self._jac_cols[t]]
-            with np.errstate(all="ignore"):
-                term = arith.upm(np.maximum(-jl, jh) * r_j)
+            term = np.maximum(-jl, jh)
+            term = term * r_j
             if np.isnan(term).any():
                 # a coordinate that does not vary contributes nothing (even where J is
                 # unbounded); elsewhere a NaN slope means no information
                 term = np.where(r_j == 0, 0.0, np.where(np.isnan(term), np.inf, term))
             r = int(self._jac_rows[t])
-            spread[r] = term if r not in spread else arith.up(spread[r] + term)
+            if r in sums:
+                sums[r] = sums[r] + term  # shapes may differ (broadcast inputs)
+                counts[r] += 1
+            else:
+                sums[r] = term
+                counts[r] = 1
         res: list[list[Any]] = []
         for i in range(k):
             col = []
             for j, (ml, mh) in enumerate(fm[i]):
                 bl, bh = fb[i][j]
-                S = spread.get(self._y_nz[i][j])
-                if S is None:
+                row = self._y_nz[i][j]
+                if row not in sums:
                     col.append((bl, bh))
                     continue
-                with np.errstate(all="ignore"):
-                    lo = np.maximum(arith.dn(ml - S), bl)
-                    hi = np.minimum(arith.up(mh + S), bh)
-                col.append((lo, hi))
+                kk = counts[row]
+                S = sums[row] * (1.0 + (kk + 4) * arith.U) + (kk + 1) * arith.TINY
+                lo = arith._dn_(ml - S)
+                hi = arith._up_(mh + S)
+                col.append((np.maximum(lo, bl), np.minimum(hi, bh)))
             res.append(col)
         return self._pack(res, n)
 
@@ -389,7 +431,7 @@ class InclusionFunction:
         boxes, n = self._inputs(args)
         run = self._natural if (self.kind == "natural" or self.centered_fallback) \
             else self._centered
-        step = int(self.chunk)
+        step = int(self.chunk if run == self._natural else self.chunk_centered)
         if n <= step:
             return run(boxes, n)
         # Evaluate in chunks: the temporaries of a chunk stay in cache, which is several
@@ -447,9 +489,52 @@ def _derived_constants(g: ca.Function, exact_outputs: Sequence[int]) -> frozense
                      and g.instruction_output(k)[0] not in needed)
 
 
-def _compile(fun: ca.Function,
-             widen: frozenset[int] = frozenset()) -> tuple[Callable[..., None], str]:
+class _Restricted:
+    def __init__(self, fun: ca.Function, keep: tuple[int, ...] | None) -> None:
+        self.fun = fun
+        self.keep = keep
+
+
+def _restrict(fun: ca.Function, derived: Sequence[int],
+              evaluate: Sequence[int] | None) -> _Restricted:
+    """Rebuild ``fun`` with one work slot per node (needed to trace constants to outputs)."""
+    syms = fun.sx_in()
+    g = ca.Function(fun.name(), syms, fun.call(syms), fun.name_in(), fun.name_out(),
+                    {"live_variables": False})
+    keep = None if evaluate is None else tuple(int(i) for i in evaluate)
+    for i in list(derived) + list(keep or ()):
+        if not 0 <= int(i) < g.n_out():
+            raise ValueError(f"output index {i} out of range for '{fun.name()}'")
+    return _Restricted(g, keep)
+
+
+def _needed_instructions(g: ca.Function, outputs: Sequence[int]) -> set[int]:
+    """Instructions of ``g`` (one slot per node) that the given outputs depend on."""
+    needed_slots: set[int] = set()
+    keep: set[int] = set()
+    outs = set(outputs)
+    for k in range(g.n_instructions() - 1, -1, -1):
+        op = g.instruction_id(k)
+        if op == ca.OP_OUTPUT:
+            if g.instruction_output(k)[0] in outs:
+                keep.add(k)
+                needed_slots.add(g.instruction_input(k)[0])
+            continue
+        o = g.instruction_output(k)
+        if o and o[0] in needed_slots:
+            keep.add(k)
+            if op not in (ca.OP_CONST, ca.OP_INPUT):
+                needed_slots.update(g.instruction_input(k))
+    return keep
+
+
+def _compile(fun: ca.Function, widen: frozenset[int] = frozenset(),
+             keep_outputs: Sequence[int] | None = None
+             ) -> tuple[Callable[..., None], str]:
     gen = _Codegen(fun, widen)
+    if keep_outputs is not None:
+        gen.only = _needed_instructions(fun, keep_outputs)
+        gen.out_map = {int(o): i for i, o in enumerate(keep_outputs)}
     src = gen.build()
     namespace: dict[str, Any] = {"_A": arith, "_K": gen.const_table, "np": np}
     exec(compile(src, f"<interval:{fun.name()}>", "exec"), namespace)  # noqa: S102

@@ -35,7 +35,8 @@ __all__ = _UNARY_NAMES + _BINARY_NAMES + list(_RENAMED.values()) + ["constpow", 
 def _unary(core: Callable) -> Callable:
     def f(a):
         a = np.asarray(a, dtype=float)
-        lo, hi = core(a[..., 0], a[..., 1])
+        with np.errstate(all="ignore"):
+            lo, hi = core(a[..., 0], a[..., 1])
         return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
 
     f.__name__ = core.__name__.rstrip("_")
@@ -47,7 +48,8 @@ def _binary(core: Callable) -> Callable:
     def f(a, b):
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
-        lo, hi = core(a[..., 0], a[..., 1], b[..., 0], b[..., 1])
+        with np.errstate(all="ignore"):
+            lo, hi = core(a[..., 0], a[..., 1], b[..., 0], b[..., 1])
         return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
 
     f.__name__ = core.__name__.rstrip("_")
@@ -64,12 +66,14 @@ for _n in _BINARY_NAMES + ["and_", "or_"]:
 def constpow(a, c: float) -> np.ndarray:
     """``a ** c`` for a real constant ``c``; a has shape (..., 2)."""
     a = np.asarray(a, dtype=float)
-    lo, hi = arith.powc(a[..., 0], a[..., 1], c)
+    with np.errstate(all="ignore"):
+        lo, hi = arith.powc(a[..., 0], a[..., 1], c)
     return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
 
 
 def powi(a, n: int) -> np.ndarray:
     """``a ** n`` for an integer ``n``; a has shape (..., 2)."""
     a = np.asarray(a, dtype=float)
-    lo, hi = arith.powi(a[..., 0], a[..., 1], n)
+    with np.errstate(all="ignore"):
+        lo, hi = arith.powi(a[..., 0], a[..., 1], n)
     return np.stack(np.broadcast_arrays(lo, hi), axis=-1)

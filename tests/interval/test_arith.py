@@ -22,6 +22,9 @@ from hypothesis import strategies as st
 from casadi_cmpc.interval import arith as A
 from casadi_cmpc.interval import ops
 
+# the raw operations report floating-point exceptions as numpy warnings; they are expected
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
+
 INF = math.inf
 NAN = math.nan
 SETTINGS = settings(max_examples=40, deadline=None,
@@ -309,47 +312,47 @@ def test_powc_sound(bs, c, rng):
 # --------------------------------------------------------------- domain convention
 WHOLE = (-INF, INF)
 CONVENTION = [
-    # division by an interval containing 0 -> the whole line
-    ("div", (1.0, 2.0, -1.0, 1.0), WHOLE),
-    ("div", (1.0, 2.0, 0.0, 1.0), WHOLE),
-    ("div", (1.0, 2.0, -1.0, 0.0), WHOLE),
-    ("div", (1.0, 2.0, 0.0, 0.0), WHOLE),
-    ("div", (0.0, 0.0, 0.0, 0.0), WHOLE),
-    ("div", (1.0, 2.0, -0.0, 3.0), WHOLE),
-    ("inv", (-1.0, 1.0), WHOLE),
-    ("inv", (0.0, 0.0), WHOLE),
-    ("inv", (0.0, 5.0), WHOLE),
-    ("cdiv", (1.0, -1.0, 1.0), WHOLE),
-    ("cdiv", (0.0, 0.0, 2.0), WHOLE),
-    ("divc", (1.0, 2.0, 0.0), WHOLE),
-    ("powi", (-1.0, 1.0, -1), WHOLE),
-    ("powi", (0.0, 1.0, -2), WHOLE),
-    ("fmod", (1.0, 2.0, -1.0, 1.0), WHOLE),
-    ("remainder", (1.0, 2.0, 0.0, 0.0), WHOLE),
-    # partly outside the domain -> the whole line
-    ("log", (-1.0, 1.0), WHOLE),
-    ("log", (0.0, 1.0), WHOLE),
-    ("log1p", (-2.0, 0.0), WHOLE),
-    ("log1p", (-1.0, 0.0), WHOLE),
-    ("sqrt", (-1.0, 4.0), WHOLE),
-    ("sqrt", (-1e-300, 0.0), WHOLE),
-    ("asin", (0.5, 1.5), WHOLE),
-    ("asin", (-1.5, 0.0), WHOLE),
-    ("acos", (0.5, 1.5), WHOLE),
-    ("acos", (-1.0000000000000002, 1.0), WHOLE),
-    ("acosh", (0.0, 2.0), WHOLE),
-    ("atanh", (0.5, 1.0), WHOLE),
-    ("atanh", (-1.0, 0.0), WHOLE),
-    ("erfinv", (0.0, 1.0), WHOLE),
-    ("tan", (1.0, 2.0), WHOLE),
-    ("tan", (-2.0, -1.5), WHOLE),
-    ("tan", (0.0, 4.0), WHOLE),
-    ("powc", (-1.0, 1.0, 0.5), WHOLE),
-    ("powc", (0.0, 1.0, -0.5), WHOLE),
-    ("pow", (-1.0, 1.0, 0.5, 0.5), WHOLE),
-    ("pow", (-1.0, 1.0, 0.5, 1.5), WHOLE),
-    ("pow", (0.0, 1.0, -1.5, -0.5), WHOLE),
-    ("pow", (0.0, 1.0, -1.0, 1.0), WHOLE),
+    # division by an interval containing 0 -> NaN (possibly undefined)
+    ("div", (1.0, 2.0, -1.0, 1.0), (NAN, NAN)),
+    ("div", (1.0, 2.0, 0.0, 1.0), (NAN, NAN)),
+    ("div", (1.0, 2.0, -1.0, 0.0), (NAN, NAN)),
+    ("div", (1.0, 2.0, 0.0, 0.0), (NAN, NAN)),
+    ("div", (0.0, 0.0, 0.0, 0.0), (NAN, NAN)),
+    ("div", (1.0, 2.0, -0.0, 3.0), (NAN, NAN)),
+    ("inv", (-1.0, 1.0), (NAN, NAN)),
+    ("inv", (0.0, 0.0), (NAN, NAN)),
+    ("inv", (0.0, 5.0), (NAN, NAN)),
+    ("cdiv", (1.0, -1.0, 1.0), (NAN, NAN)),
+    ("cdiv", (0.0, 0.0, 2.0), (NAN, NAN)),
+    ("divc", (1.0, 2.0, 0.0), (NAN, NAN)),
+    ("powi", (-1.0, 1.0, -1), (NAN, NAN)),
+    ("powi", (0.0, 1.0, -2), (NAN, NAN)),
+    ("fmod", (1.0, 2.0, -1.0, 1.0), (NAN, NAN)),
+    ("remainder", (1.0, 2.0, 0.0, 0.0), (NAN, NAN)),
+    # partly outside the domain -> NaN (possibly undefined)
+    ("log", (-1.0, 1.0), (NAN, NAN)),
+    ("log", (0.0, 1.0), (NAN, NAN)),
+    ("log1p", (-2.0, 0.0), (NAN, NAN)),
+    ("log1p", (-1.0, 0.0), (NAN, NAN)),
+    ("sqrt", (-1.0, 4.0), (NAN, NAN)),
+    ("sqrt", (-1e-300, 0.0), (NAN, NAN)),
+    ("asin", (0.5, 1.5), (NAN, NAN)),
+    ("asin", (-1.5, 0.0), (NAN, NAN)),
+    ("acos", (0.5, 1.5), (NAN, NAN)),
+    ("acos", (-1.0000000000000002, 1.0), (NAN, NAN)),
+    ("acosh", (0.0, 2.0), (NAN, NAN)),
+    ("atanh", (0.5, 1.0), (NAN, NAN)),
+    ("atanh", (-1.0, 0.0), (NAN, NAN)),
+    ("erfinv", (0.0, 1.0), (NAN, NAN)),
+    ("tan", (1.0, 2.0), (NAN, NAN)),
+    ("tan", (-2.0, -1.5), (NAN, NAN)),
+    ("tan", (0.0, 4.0), (NAN, NAN)),
+    ("powc", (-1.0, 1.0, 0.5), (NAN, NAN)),
+    ("powc", (0.0, 1.0, -0.5), (NAN, NAN)),
+    ("pow", (-1.0, 1.0, 0.5, 0.5), (NAN, NAN)),
+    ("pow", (-1.0, 1.0, 0.5, 1.5), (NAN, NAN)),
+    ("pow", (0.0, 1.0, -1.5, -0.5), (NAN, NAN)),
+    ("pow", (0.0, 1.0, -1.0, 1.0), (NAN, NAN)),
     # entirely outside the domain -> NaN
     ("log", (-2.0, -1.0), (NAN, NAN)),
     ("log", (-1.0, 0.0), (NAN, NAN)),
@@ -687,11 +690,11 @@ def test_remainder_subnormal_halving():
 
 
 def test_pow_negative_base_non_thin_exponent():
-    """x**y with x in [-1e6, 1] and y in [-1e6, 1] takes the value -1e6 (y = 1)."""
-    lo, hi = A.pow(*(np.array([v]) for v in (-1e6, 1.0, -1e6, 1.0)))
-    assert lo[0] <= -1e6 and hi[0] >= 1.0
-    lo, hi = A.pow(*(np.array([v]) for v in (-2.0, 3.0, 1.0, 3.0)))
-    assert lo[0] <= -8.0 and hi[0] >= 27.0
+    """x**y with x partly negative and a non-integer exponent in y is undefined somewhere:
+    no information (NaN), never a bounded interval that misses x**1 = -1e6."""
+    for args in ((-1e6, 1.0, -1e6, 1.0), (-2.0, 3.0, 1.0, 3.0)):
+        lo, hi = A.pow(*(np.array([v]) for v in args))
+        assert np.isnan(lo[0]) and np.isnan(hi[0])
 
 
 @settings(max_examples=100, deadline=None)

@@ -165,10 +165,6 @@ def test_jacobian_inclusion_contains_the_jacobian(model, wrt, width):
         assert np.all(_width(enc) < 0.1 * (1.0 + np.abs(enc[..., 0])))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "Model.function is built from casadi.cse(f): CasADi merges the two exp(sin(x)) nodes, "
-    "simplifies e - e to 0 and folds atan(0.5 + 0) into a double, so the model's inclusion "
-    "functions enclose fl(atan(0.5)) instead of the exact value of the user's f"))
 @pytest.mark.parametrize("kind", ["natural", "centered"])
 def test_model_inclusion_encloses_the_user_expression(kind):
     x = ca.SX.sym("x")

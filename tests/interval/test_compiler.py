@@ -493,10 +493,6 @@ def test_centered_does_not_fold_constants_in_floating_point():
 
 
 # ---------------------------------------------------------- known compiler problems
-@pytest.mark.xfail(strict=True, reason=(
-    "the documented guarantee 'where the Function is undefined on part of a box the result "
-    "is [-inf, inf]' holds for single operations only: a bounded operation applied to "
-    "the whole line (atan, tanh, erf, ...) gives a bounded enclosure"))
 def test_undefined_on_part_of_the_box_gives_whole_line():
     x = ca.SX.sym("x")
     fun = ca.Function("f", [x], [ca.atan(ca.log(x))])
