@@ -16,6 +16,8 @@ from .model import *  # noqa: F401,F403
 from .model import __all__ as _model_all  # noqa: F401
 from .sets import *  # noqa: F401,F403
 from .sets import __all__ as _sets_all  # noqa: F401
+from .solvers import *  # noqa: F401,F403
+from .solvers import __all__ as _solvers_all  # noqa: F401
 
 __version__ = "0.1.0"
 
@@ -29,4 +31,4 @@ def __getattr__(name: str):
 
 
 __all__ = (["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)
-           + list(_control_all))
+           + list(_solvers_all) + list(_control_all))

@@ -429,6 +429,13 @@ class InclusionFunction:
 
     def __call__(self, *args: Any) -> list[np.ndarray]:
         boxes, n = self._inputs(args)
+        return self.evaluate_unchecked(boxes, n)
+
+    def evaluate_unchecked(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
+        """Evaluate on already validated ``(N_i, d_i, 2)`` float arrays (N_i in {1, n}).
+
+        For solvers that build their own box batches; no shape or NaN checks are made.
+        """
         run = self._natural if (self.kind == "natural" or self.centered_fallback) \
             else self._centered
         step = int(self.chunk if run == self._natural else self.chunk_centered)

@@ -1,0 +1,7 @@
+"""Interval solvers built on one batched branch-and-bound engine."""
+
+from .engine import Status  # noqa: F401
+from .sivia import *  # noqa: F401,F403
+from .sivia import __all__ as _sivia_all  # noqa: F401
+
+__all__ = ["Status"] + list(_sivia_all)
