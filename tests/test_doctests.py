@@ -13,6 +13,7 @@ MODULES = [
     "casadi_cmpc.sets.polytope",
     "casadi_cmpc.sets.paving",
     "casadi_cmpc.sets.zonotope",
+    "casadi_cmpc.solvers.sivia",
 ]
 
 
