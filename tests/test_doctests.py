@@ -14,6 +14,7 @@ MODULES = [
     "casadi_cmpc.sets.paving",
     "casadi_cmpc.sets.zonotope",
     "casadi_cmpc.solvers.sivia",
+    "casadi_cmpc.solvers.minimize",
 ]
 
 

@@ -1,7 +1,9 @@
 """Interval solvers built on one batched branch-and-bound engine."""
 
 from .engine import Status  # noqa: F401
+from .minimize import *  # noqa: F401,F403
+from .minimize import __all__ as _minimize_all  # noqa: F401
 from .sivia import *  # noqa: F401,F403
 from .sivia import __all__ as _sivia_all  # noqa: F401
 
-__all__ = ["Status"] + list(_sivia_all)
+__all__ = ["Status"] + list(_sivia_all) + list(_minimize_all)

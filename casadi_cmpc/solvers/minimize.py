@@ -1,0 +1,484 @@
+"""Interval global minimisation with a certified bracket on the minimum (thesis Alg 4.2).
+
+The search is a classifier plugged into the batched branch-and-bound engine
+(:func:`~casadi_cmpc.solvers.engine.branch_and_bound`): each level, the whole frontier is
+enclosed at once, the certified upper bound of the minimum is improved from points of the
+frontier, and boxes that provably cannot hold a global minimiser are discarded (OUTER).
+Nothing is ever INNER: the undecided boxes narrower than ``eps`` are the candidates.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .._validate import as_boxes
+from ..exceptions import DimensionError, UnboundedSetError
+from ..interval.compiler import InclusionFunction
+from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
+
+__all__ = ["minimize", "MinimizeResult"]
+
+_KINDS = ("centered", "natural")
+_LOCAL_SOLVERS = ("ipopt", None)
+
+# Local solver schedule: one solve at level 0, then one every _LOCAL_EVERY levels, at most
+# _LOCAL_MAX solves in total. Starting points closer than this fraction of the diameter of
+# X0 to an earlier start are skipped.
+_LOCAL_EVERY = 3
+_LOCAL_MAX = 6
+_LOCAL_SAME_START = 1e-3
+# IPOPT solves with the constraints tightened to g(x) <= -margin, margin relative to the
+# scale of g at the start, so that its solution is strictly feasible and can be certified.
+_LOCAL_MARGIN = 1e-8
+# When IPOPT's point cannot be certified, points x + 2^-k (x_best - x), k = 1.._SEGMENT_STEPS
+# towards the best certified point are tried.
+_SEGMENT_STEPS = 40
+# Vertices of the boxes with the best midpoint values are tried as well (thesis Fig 4.2),
+# for the _VERTEX_BOXES best boxes of each level when 2**n <= _VERTEX_MAX.
+_VERTEX_BOXES = 4
+_VERTEX_MAX = 64
+
+
+@dataclass(frozen=True, eq=False)
+class MinimizeResult:
+    """Result of :func:`minimize`: a certified bracket ``lower <= min f <= upper``.
+
+    Attributes
+    ----------
+    success : bool
+        ``status == Status.PROVED``.
+    status : Status
+        ``PROVED``: the search ran to completion and both bounds are finite.
+        ``BUDGET``: ``max_boxes``, ``time_limit`` or an interruption stopped the search; the
+        bracket is still certified (the leftover boxes are among the candidates).
+        ``DISPROVED``: every box was proven to violate a constraint: the problem is
+        infeasible (``lower = upper = inf``, ``x is None``).
+        ``UNDECIDED``: the search completed but no feasible point could be certified
+        (``upper = inf``), e.g. constraints whose feasible set has an empty interior.
+        ``NUMERICAL``: the enclosure of ``f`` is unbounded below on a candidate box (``f``
+        undefined or unbounded there), so ``lower = -inf``.
+    message : str
+        What was proven, in words.
+    method : str
+        ``"<kind>"`` or ``"<kind>+ipopt"``: the inclusion form and the local solver used.
+    lower : float
+        Certified lower bound: every feasible ``x`` in ``X0`` has ``f(x) >= lower``.
+    upper : float
+        Certified upper bound: ``f(x) <= upper`` at the proven-feasible point ``x``, hence
+        ``min f <= upper`` (``inf`` when no feasible point was certified).
+    x : ndarray, shape (n,), or None
+        The best point found. When ``x_feasible`` it is proven feasible and
+        ``f(x) <= upper``; otherwise it is only a guess (no certified point was found).
+    x_feasible : bool
+        True when ``x`` is proven to lie in ``X0`` and to satisfy every constraint.
+    fun : float
+        Same as ``upper`` (scipy's name for the optimal value).
+    candidates : ndarray, shape (N, n, 2)
+        Boxes that may contain global minimisers: every global minimiser lies in their
+        union. Boxes whose lower bound exceeds the final ``upper`` are removed.
+    nit : int
+        Branch-and-bound levels.
+    n_boxes : int
+        Boxes classified.
+    n_local : int
+        Local (IPOPT) solves made (a solve whose tightened problem fails is repeated once
+        with the original constraints; both count).
+    elapsed : float
+        Wall-clock time in seconds.
+    """
+
+    success: bool
+    status: Status
+    message: str
+    method: str
+    lower: float
+    upper: float
+    x: np.ndarray | None
+    x_feasible: bool
+    fun: float
+    candidates: np.ndarray
+    nit: int
+    n_boxes: int
+    n_local: int
+    elapsed: float
+
+    @property
+    def width(self) -> float:
+        """Width ``upper - lower`` of the certified bracket."""
+        return float(self.upper - self.lower)
+
+    def __repr__(self) -> str:
+        x = None if self.x is None else np.array2string(self.x, precision=6)
+        return (f"MinimizeResult(status={self.status.name}, lower={self.lower:.10g}, "
+                f"upper={self.upper:.10g}, x={x}, x_feasible={self.x_feasible}, "
+                f"candidates={self.candidates.shape[0]}, nit={self.nit}, "
+                f"n_boxes={self.n_boxes}, elapsed={self.elapsed:.3g})")
+
+
+# --------------------------------------------------------------------------- validation
+def _check_function(fun: Any, name: str, n: int | None) -> ca.Function:
+    if not isinstance(fun, ca.Function):
+        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
+    if fun.n_in() != 1 or fun.n_out() != 1:
+        raise DimensionError(
+            f"{name} must have one input and one output; '{fun.name()}' has {fun.n_in()} "
+            f"inputs and {fun.n_out()} outputs (use casadi.vertcat to stack them)")
+    if n is not None and fun.numel_in(0) != n:
+        raise DimensionError(
+            f"{name} takes an input of {fun.numel_in(0)} elements but X0 has dimension {n}")
+    return fun
+
+
+def _thin(points: np.ndarray) -> np.ndarray:
+    return np.stack([points, points], axis=-1)
+
+
+class _Search:
+    """The state of one minimisation: inclusion functions and the certified upper bound."""
+
+    def __init__(self, f: ca.Function, g: ca.Function | None, x0: np.ndarray, kind: str,
+                 local_solver: str | None) -> None:
+        self.F = InclusionFunction(f, kind)
+        self.F_point = self.F if kind == "natural" else InclusionFunction(f, "natural")
+        self.G = None if g is None else InclusionFunction(g, kind)
+        self.G_point = None
+        if g is not None:
+            self.G_point = self.G if kind == "natural" else InclusionFunction(g, "natural")
+        self.n = x0.shape[0]
+        self.lo0, self.hi0 = x0[:, 0].copy(), x0[:, 1].copy()
+        self.diam0 = float(np.max(self.hi0 - self.lo0)) if self.n else 0.0
+        self.upper = np.inf
+        self.x: np.ndarray | None = None
+        self.guess: tuple[float, np.ndarray] | None = None  # best unverified point
+        self.local_solver = local_solver
+        self._nlp: Any = None
+        self.n_local = 0
+        self._starts: list[np.ndarray] = []
+        self._last = None  # (midpoints, midpoint values, flb) of the last level's kept boxes
+
+    # ------------------------------------------------------------ point certification
+    def certify_points(self, pts: np.ndarray) -> None:
+        """Certify ``f <= value`` and feasibility at the points; keep the best bound."""
+        if pts.shape[0] == 0:
+            return
+        pts = np.clip(pts, self.lo0, self.hi0)
+        thin = _thin(pts)
+        m = pts.shape[0]
+        fu = self.F_point.evaluate_unchecked([thin], m)[0][:, 0, 1]
+        ok = np.isfinite(fu)
+        if self.G_point is not None:
+            gu = self.G_point.evaluate_unchecked([thin], m)[0][..., 1]
+            ok &= (gu <= 0).all(axis=1)
+        if not ok.any():
+            return
+        k = int(np.argmin(np.where(ok, fu, np.inf)))
+        if fu[k] < self.upper:
+            self.upper = float(fu[k])
+            self.x = pts[k].copy()
+
+    def _note_guess(self, value: float, x: np.ndarray) -> None:
+        if np.isfinite(value) and (self.guess is None or value < self.guess[0]):
+            self.guess = (float(value), x.copy())
+
+    # --------------------------------------------------------------------- classifier
+    def classify(self, fr: BoxFrontier) -> np.ndarray:
+        n_box = len(fr)
+        boxes = fr.boxes
+        labels = np.full(n_box, UNDECIDED, dtype=np.int8)
+        flb = self.F.evaluate_unchecked([boxes], n_box)[0][:, 0, 0]
+        infeasible = np.zeros(n_box, dtype=bool)
+        if self.G is not None:
+            g = self.G.evaluate_unchecked([boxes], n_box)[0]
+            infeasible = (g[..., 0] > 0).any(axis=1)
+        live = ~infeasible
+        if live.any():
+            lo, hi = fr.lo[live], fr.hi[live]
+            mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+            fmid = self.F_point.evaluate_unchecked([_thin(mid)], mid.shape[0])[0][:, 0, 1]
+            self.certify_points(mid)
+            order = np.argsort(np.where(np.isfinite(fmid), fmid, np.inf), kind="stable")
+            best = order[:_VERTEX_BOXES]
+            if 0 < self.n and 2 ** self.n <= _VERTEX_MAX and best.size:
+                bits = np.array(np.meshgrid(*[[0.0, 1.0]] * self.n, indexing="ij"))
+                bits = bits.reshape(self.n, -1).T  # (2^n, n)
+                verts = np.where(bits[None] == 1.0, hi[best][:, None, :], lo[best][:, None, :])
+                self.certify_points(verts.reshape(-1, self.n))
+            keep = flb[live] <= self.upper
+            self._last = (mid[keep], fmid[keep], flb[live][keep])
+        else:
+            self._last = None
+        labels[infeasible | (flb > self.upper)] = OUTER
+        return labels
+
+    # -------------------------------------------------------------------- local solver
+    def on_level(self, level: int, fr: BoxFrontier, labels: np.ndarray) -> None:
+        if (self.local_solver is None or self.n_local >= _LOCAL_MAX or self._last is None
+                or level % _LOCAL_EVERY):
+            return
+        mid, fmid, flb = self._last
+        if mid.shape[0] == 0:
+            return
+        starts = []
+        if np.isfinite(fmid).any():
+            starts.append(mid[int(np.argmin(np.where(np.isfinite(fmid), fmid, np.inf)))])
+        starts.append(mid[int(np.argmin(flb))])
+        for s in starts:
+            if self.n_local >= _LOCAL_MAX:
+                break
+            tol = _LOCAL_SAME_START * max(self.diam0, 1e-300)
+            if any(np.max(np.abs(s - t)) <= tol for t in self._starts):
+                continue
+            self._starts.append(s)
+            self.local_solve(s)
+
+    def _build_nlp(self) -> Any:
+        x = ca.SX.sym("x", self.n)
+        nlp = {"x": x, "f": self.F.fun(x)}
+        if self.G is not None:
+            nlp["g"] = ca.vec(self.G.fun(x))
+        opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+                "ipopt.max_iter": 200, "ipopt.tol": 1e-10, "ipopt.constr_viol_tol": 1e-10,
+                "error_on_fail": False}
+        return ca.nlpsol("minimize_local", "ipopt", nlp, opts)
+
+    def _run_nlp(self, args: dict[str, Any]) -> dict[str, Any] | None:
+        self.n_local += 1
+        try:
+            return self._nlp(**args)
+        except RuntimeError:  # an evaluation error: the local solver is only a heuristic
+            return None
+
+    def local_solve(self, start: np.ndarray) -> None:
+        """One IPOPT solve from ``start``; its solution is certified like any other point."""
+        if self._nlp is None:
+            self._nlp = self._build_nlp()
+        args: dict[str, Any] = {"x0": start, "lbx": self.lo0, "ubx": self.hi0}
+        if self.G is not None:
+            g0 = np.asarray(self.G.fun(start), dtype=float).reshape(-1)
+            scale = np.maximum(1.0, np.abs(np.where(np.isfinite(g0), g0, 1.0)))
+            args["lbg"] = -np.inf
+            args["ubg"] = -_LOCAL_MARGIN * scale
+        sol = self._run_nlp(args)
+        if sol is not None and not self._nlp.stats().get("success", False) and "ubg" in args:
+            # The tightened problem may be infeasible (e.g. equality-like constraints): solve
+            # the original one for a best guess.
+            args["ubg"] = 0.0
+            sol = self._run_nlp(args)
+        if sol is None:
+            return
+        x = np.asarray(sol["x"], dtype=float).reshape(-1)
+        if not np.isfinite(x).all():
+            return
+        x = np.clip(x, self.lo0, self.hi0)
+        if self._nlp.stats().get("success", False):
+            self._note_guess(float(sol["f"]), x)
+        before = self.upper
+        self.certify_points(x[None])
+        if self.upper == before and self.x is not None and self.G is not None:
+            # Not certified (a constraint is active up to IPOPT's tolerance): try points on
+            # the segment towards the best certified point, closest to x first.
+            t = 2.0 ** -np.arange(_SEGMENT_STEPS, 0, -1)
+            self.certify_points(x[None] + t[:, None] * (self.x - x)[None])
+
+
+# ------------------------------------------------------------------------------ solver
+def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | None = None, *,
+             kind: str = "centered", local_solver: str | None = "ipopt",
+             max_boxes: int = 2_000_000, time_limit: float | None = None,
+             progress: bool | None = None) -> MinimizeResult:
+    """Certified global minimisation over a box, with inequality constraints (thesis Alg 4.2).
+
+    Finds ``lower <= min {f(x) : x in X0, g(x) <= 0} <= upper`` by interval branch and
+    bound, together with the boxes that may contain the global minimisers.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        The objective ``R^n -> R``: one input of ``n`` elements and one scalar output (an SX
+        Function; an MX Function is expanded).
+    X0 : Box or array_like, shape (n, 2)
+        The (bounded) search box.
+    eps : float
+        Undecided boxes whose widest component is at most ``eps`` are not bisected: they
+        become candidates. Smaller ``eps`` narrows the bracket and the candidate boxes.
+    constraints : casadi.Function, optional
+        ``g : R^n -> R^p``; the feasible set is ``{x in X0 : g(x) <= 0}`` (componentwise).
+    kind : {"centered", "natural"}
+        Inclusion function used to bound ``f`` and ``g`` on boxes. The centered
+        (mean-value) form, intersected with the natural one, shrinks quadratically with the
+        box width and prunes far better near minimisers.
+    local_solver : {"ipopt", None}
+        ``"ipopt"``: a few local solves (CasADi ``nlpsol``) started from the most promising
+        midpoints supply candidate points; their value and feasibility are then certified by
+        interval evaluation like any other point, so the bracket stays certified. ``None``:
+        only midpoints and vertices of boxes are tried.
+    max_boxes : int
+        Stop after classifying this many boxes (``status = BUDGET``).
+    time_limit : float, optional
+        Stop after this many seconds (checked once per level; ``status = BUDGET``).
+    progress : bool or None
+        tqdm progress bar (None: only for searches longer than 2 s).
+
+    Returns
+    -------
+    MinimizeResult
+        ``lower``, ``upper`` (certified bracket), ``x`` (best certified point), ``fun``
+        (``= upper``), ``candidates`` (N, n, 2), ``success``, ``status``, ``message``,
+        ``nit``, ``n_boxes``, ``n_local``, ``elapsed``, ``x_feasible``.
+
+    Raises
+    ------
+    TypeError
+        ``f`` or ``constraints`` is not a casadi.Function.
+    DimensionError
+        ``f`` is not scalar or has several inputs/outputs; the input size of ``f`` or
+        ``constraints`` differs from the dimension of ``X0``; ``X0`` is not a single box.
+    UnboundedSetError
+        ``X0`` has an infinite bound.
+    ValueError
+        ``eps <= 0``, unknown ``kind`` or ``local_solver``, ``max_boxes < 1``.
+
+    Notes
+    -----
+    Each level of the breadth-first search (thesis §4.1.3, Alg 4.2; Jaulin et al., 2001):
+
+    1. enclose ``f`` (and ``g``) on every box of the frontier with ``kind``;
+    2. evaluate ``f`` and ``g`` at the thin midpoint of every box not proven infeasible, and
+       at the vertices of the boxes with the best midpoint values: at a point ``p`` with
+       ``sup G(p) <= 0`` (feasibility proven), ``sup F(p)`` is a certified upper bound
+       ``f̄`` of the minimum;
+    3. discard (OUTER) the boxes with ``inf F(X) > f̄`` (no minimiser inside) and those with
+       ``inf G_i(X) > 0`` for some ``i`` (no feasible point inside).
+
+    Every few levels a local solve (IPOPT, constraints tightened slightly so that its
+    solution is strictly feasible) proposes another point, certified as in step 2. At the
+    end the candidate boxes with ``inf F(X) > f̄`` are removed, and
+    ``lower = min inf F(X)`` over the remaining candidates: every global minimiser lies in
+    one of them, so ``min f >= lower``. With ``upper = f̄`` the bracket is certified,
+    including floating-point rounding. The frontier need not reach ``eps`` for the bracket to
+    be sound: a search stopped by a limit keeps its leftover boxes as candidates.
+
+    Examples
+    --------
+    >>> import casadi as ca, numpy as np
+    >>> from casadi_cmpc.solvers.minimize import minimize
+    >>> x = ca.SX.sym("x", 2)
+    >>> f = ca.Function("f", [x], [(x[0] - 0.5)**2 + (x[1] + 0.25)**2 + 1])
+    >>> res = minimize(f, np.array([[-2, 2], [-2, 2]]), eps=1e-3)
+    >>> bool(res.success and res.lower <= 1.0 <= res.upper and res.upper - res.lower < 1e-6)
+    True
+    >>> g = ca.Function("g", [x], [x[0] + x[1] - 1])     # x0 + x1 <= 1
+    >>> res = minimize(ca.Function("l", [x], [-x[0] - x[1]]), np.array([[0, 1], [0, 1]]),
+    ...                eps=1e-3, constraints=g)
+    >>> bool(res.lower <= -1.0 <= res.upper < -1.0 + 1e-6 and res.x_feasible)
+    True
+    """
+    t0 = time.perf_counter()
+    f = _check_function(f, "f", None)
+    if f.numel_out(0) != 1:
+        raise DimensionError(
+            f"f must be scalar (R^n -> R); '{f.name()}' has an output of shape "
+            f"{f.size_out(0)}")
+    n = f.numel_in(0)
+    if n == 0:
+        raise DimensionError(f"f must take at least one variable; '{f.name()}' takes none")
+    x0 = as_boxes(X0, n, "X0")
+    if x0.shape[0] != 1:
+        raise DimensionError(f"X0 must be a single box; got {x0.shape[0]} boxes")
+    x0 = x0[0]
+    if not np.isfinite(x0).all():
+        raise UnboundedSetError(
+            f"X0 must be bounded; got bounds {x0.tolist()} (intersect it with a finite box)")
+    try:
+        eps = float(eps)
+    except (TypeError, ValueError):
+        raise ValueError(f"eps must be a positive number; got {eps!r}") from None
+    if not np.isfinite(eps) or eps <= 0:
+        raise ValueError(f"eps must be a positive number; got {eps}")
+    kind_l = str(kind).lower()
+    if kind_l not in _KINDS:
+        raise ValueError(f"unknown kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
+    local = None if local_solver is None else str(local_solver).lower()
+    if local not in _LOCAL_SOLVERS:
+        raise ValueError(f"unknown local_solver '{local_solver}'; valid: 'ipopt', None")
+    if int(max_boxes) < 1:
+        raise ValueError(f"max_boxes must be at least 1; got {max_boxes}")
+    g = None
+    if constraints is not None:
+        g = _check_function(constraints, "constraints", n)
+        if g.numel_out(0) == 0:
+            g = None
+
+    search = _Search(f, g, x0, kind_l, local)
+    out = branch_and_bound(BoxFrontier.from_boxes(x0[None]), search.classify, eps,
+                           max_boxes=int(max_boxes), time_limit=time_limit, keep_outer=False,
+                           progress=progress, desc="minimize", on_level=search.on_level)
+    cand = out.boundary
+    boxes = cand.boxes
+    upper = search.upper
+    if len(cand):
+        # The candidates were set aside with the bound of their level: prune them against
+        # the final one (and drop unclassified leftovers proven infeasible).
+        m = len(cand)
+        flb = search.F.evaluate_unchecked([boxes], m)[0][:, 0, 0]
+        keep = ~(flb > upper)
+        if search.G is not None:
+            gl = search.G.evaluate_unchecked([boxes], m)[0][..., 0]
+            keep &= ~(gl > 0).any(axis=1)
+        boxes, flb = boxes[keep], flb[keep]
+    else:
+        flb = np.zeros(0)
+    lower = float(np.min(flb)) if flb.size else np.inf
+    if flb.size == 0 and np.isfinite(upper):  # not reachable with sound enclosures
+        lower = upper
+    lower = min(lower, upper)
+
+    x = search.x
+    x_feasible = x is not None
+    if x is None and boxes.shape[0]:
+        # No certified point: report IPOPT's best solution, else the midpoint of the most
+        # promising candidate, as an unproven guess.
+        if search.guess is not None:
+            x = search.guess[1]
+        else:
+            b = boxes[int(np.argmin(flb))]
+            x = np.clip(0.5 * b[:, 0] + 0.5 * b[:, 1], b[:, 0], b[:, 1])
+    method = kind_l + ("+ipopt" if local else "")
+    bracket = f"[{lower:.10g}, {upper:.10g}]"
+    ncand = boxes.shape[0]
+    if out.status != Status.PROVED:
+        status = Status.BUDGET
+        message = (f"{out.message}: the search stopped early; the bracket {bracket} is "
+                   f"certified ({ncand} candidate boxes, some wider than eps)")
+        if not np.isfinite(upper):
+            message += "; no feasible point could be certified (upper = inf)"
+    elif ncand == 0 and not np.isfinite(upper):
+        status = Status.DISPROVED
+        lower = np.inf
+        x = None
+        message = ("the problem is infeasible: every box of X0 is proven to violate a "
+                   "constraint")
+    elif not np.isfinite(upper):
+        status = Status.UNDECIDED
+        message = (f"search completed, but no feasible point could be certified (upper = "
+                   f"inf); the minimum, if the problem is feasible, is >= {lower:.10g} "
+                   f"({ncand} candidate boxes)")
+    elif not np.isfinite(lower):
+        status = Status.NUMERICAL
+        message = (f"the enclosure of f is unbounded below on some candidate box (f "
+                   f"undefined or unbounded there): lower = -inf, upper = {upper:.10g}")
+    else:
+        status = Status.PROVED
+        message = (f"global minimum certified in {bracket} (width {upper - lower:.3g}); "
+                   f"{ncand} candidate boxes")
+    return MinimizeResult(
+        success=status == Status.PROVED, status=status, message=message, method=method,
+        lower=float(lower), upper=float(upper), x=None if x is None else np.array(x),
+        x_feasible=bool(x_feasible and x is not None), fun=float(upper), candidates=boxes,
+        nit=out.levels, n_boxes=out.n_classified, n_local=search.n_local,
+        elapsed=time.perf_counter() - t0)
