@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import doctest
 import itertools
 
 import casadi as ca
@@ -14,7 +13,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from casadi_cmpc.exceptions import DimensionError, UnboundedSetError
-from casadi_cmpc.solvers import minimize as minimize_module
 from casadi_cmpc.solvers.engine import Status
 from casadi_cmpc.solvers.minimize import MinimizeResult, minimize
 
@@ -241,11 +239,6 @@ def test_result_is_a_frozen_dataclass():
     assert res.method == "natural+ipopt"
     assert res.width == res.upper - res.lower
     assert "PROVED" in repr(res) and "certified" in res.message
-
-
-def test_docstring_examples():
-    result = doctest.testmod(minimize_module, optionflags=doctest.NORMALIZE_WHITESPACE)
-    assert result.attempted > 0 and result.failed == 0
 
 
 # ----------------------------------------------------------- random quadratics
