@@ -5,5 +5,7 @@ from .minimize import *  # noqa: F401,F403
 from .minimize import __all__ as _minimize_all  # noqa: F401
 from .sivia import *  # noqa: F401,F403
 from .sivia import __all__ as _sivia_all  # noqa: F401
+from .zonotope_sivia import *  # noqa: F401,F403
+from .zonotope_sivia import __all__ as _zsivia_all  # noqa: F401
 
-__all__ = ["Status"] + list(_sivia_all) + list(_minimize_all)
+__all__ = ["Status"] + list(_sivia_all) + list(_minimize_all) + list(_zsivia_all)
