@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import enum
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -45,7 +46,12 @@ class Status(enum.IntEnum):
 
 
 class Frontier(Protocol):
-    """What the engine needs from a frontier representation."""
+    """What the engine needs from a frontier representation.
+
+    A frontier may also have ``split() -> (children, stuck)``; the engine then uses it instead
+    of ``bisect`` and reports the ``stuck`` elements (too narrow to be split in floating point)
+    as boundary instead of classifying them again and again.
+    """
 
     def __len__(self) -> int: ...
 
@@ -57,6 +63,26 @@ class Frontier(Protocol):
 
     @staticmethod
     def concat(parts: list[Any]) -> Any: ...
+
+
+def _widest(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``w`` (N, n): the largest entry and the lowest index holding it.
+
+    Column by column: numpy reductions along a short last axis are slow.
+    """
+    N, n = w.shape
+    if n == 0:
+        return np.zeros(N), np.zeros(N, dtype=np.intp)
+    if n > 8:
+        k = np.argmax(w, axis=1)
+        return w[np.arange(N), k], k
+    best = w[:, 0].copy()
+    k = np.zeros(N, dtype=np.intp)
+    for j in range(1, n):
+        col = w[:, j]
+        np.putmask(k, col > best, j)  # strictly greater: ties keep the lowest index
+        np.maximum(best, col, out=best)
+    return best, k
 
 
 @dataclass
@@ -71,6 +97,8 @@ class BoxFrontier:
     hi: np.ndarray
     scale: np.ndarray | None = None
     split_ratio: float = 0.5
+    # widest component of each box, kept from width() for split() (same boxes, same order)
+    _split_dim: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_boxes(cls, boxes: np.ndarray, scale: np.ndarray | None = None,
@@ -88,33 +116,64 @@ class BoxFrontier:
         return np.stack([self.lo, self.hi], axis=-1)
 
     def take(self, mask: np.ndarray) -> BoxFrontier:
-        return BoxFrontier(self.lo[mask], self.hi[mask], self.scale, self.split_ratio)
+        """The boxes selected by a boolean mask (N,) or by an array of indices."""
+        idx = np.asarray(mask)
+        if idx.dtype == bool:
+            idx = np.flatnonzero(idx)  # integer take is far faster than boolean row indexing
+        k = None if self._split_dim is None else self._split_dim.take(idx)
+        return BoxFrontier(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), self.scale,
+                           self.split_ratio, k)
+
+    def _widths(self) -> np.ndarray:
+        with np.errstate(over="ignore"):  # a huge box has an infinite width
+            w = self.hi - self.lo
+            if self.scale is not None:
+                w = w / self.scale
+        return w
 
     def width(self) -> np.ndarray:
         """Largest component width of each box (relative to ``scale`` when given), (N,)."""
-        w = self.hi - self.lo
-        if self.scale is not None:
-            w = w / self.scale
-        return w.max(axis=1) if w.shape[1] else np.zeros(w.shape[0])
+        w, self._split_dim = _widest(self._widths())
+        return w
+
+    def split(self) -> tuple[BoxFrontier, BoxFrontier]:
+        """``(children, stuck)``: the two halves of every box that can be split, and the boxes
+        whose widest component holds no float strictly between its bounds (not split)."""
+        lo, hi = self.lo, self.hi
+        n = lo.shape[1]
+        k = self._split_dim
+        if k is None or len(k) != lo.shape[0]:
+            k = _widest(self._widths())[1]
+        flat = np.arange(lo.shape[0]) * n + k  # position of the split bound in lo.ravel()
+        a = lo.take(flat)
+        b = hi.take(flat)
+        r = self.split_ratio
+        with np.errstate(over="ignore", invalid="ignore"):
+            c = a + r * (b - a) if r != 0.5 else 0.5 * a + 0.5 * b
+        ok = (a < c) & (c < b)
+        stuck = self.take(np.zeros(0, dtype=np.intp))
+        if not ok.all():
+            with np.errstate(over="ignore", invalid="ignore"):
+                alt = (1.0 - r) * a + r * b  # b - a may overflow for huge boxes
+            c = np.where(ok, c, alt)
+            ok = (a < c) & (c < b)
+        if not ok.all():
+            stuck = self.take(~ok)
+            keep = np.flatnonzero(ok)
+            lo, hi, c = lo[keep], hi[keep], c[keep]
+            flat = np.arange(lo.shape[0]) * n + k[keep]
+        left_hi = hi.copy()
+        left_hi.ravel()[flat] = c
+        right_lo = lo.copy()
+        right_lo.ravel()[flat] = c
+        children = BoxFrontier(np.concatenate([lo, right_lo]), np.concatenate([left_hi, hi]),
+                               self.scale, self.split_ratio)
+        return children, stuck
 
     def bisect(self) -> BoxFrontier:
-        lo, hi = self.lo, self.hi
-        w = hi - lo
-        if self.scale is not None:
-            w = w / self.scale
-        k = np.argmax(w, axis=1)
-        rows = np.arange(lo.shape[0])
-        a = lo[rows, k]
-        b = hi[rows, k]
-        r = self.split_ratio
-        c = a + r * (b - a) if r != 0.5 else 0.5 * a + 0.5 * b
-        c = np.minimum(np.maximum(c, a), b)
-        left_hi = hi.copy()
-        left_hi[rows, k] = c
-        right_lo = lo.copy()
-        right_lo[rows, k] = c
-        return BoxFrontier(np.concatenate([lo, right_lo]), np.concatenate([left_hi, hi]),
-                           self.scale, self.split_ratio)
+        """Both halves of every box; a box that cannot be split is kept whole (see ``split``)."""
+        children, stuck = self.split()
+        return BoxFrontier.concat([children, stuck]) if len(stuck) else children
 
     @staticmethod
     def concat(parts: list[BoxFrontier]) -> BoxFrontier:
@@ -186,7 +245,10 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     -------
     BnBOutcome
     """
-    from tqdm.auto import tqdm
+    with warnings.catch_warnings():
+        # in a notebook without ipywidgets tqdm.auto warns, then uses the text bar
+        warnings.simplefilter("ignore")
+        from tqdm.auto import tqdm
 
     if not np.isfinite(eps) or eps <= 0:
         raise ValueError(f"eps must be a positive number; got {eps}")
@@ -194,17 +256,15 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             np.isfinite(frontier.lo).all() and np.isfinite(frontier.hi).all()):
         raise UnboundedSetError("the initial box of a branch and bound must be bounded")
     t0 = time.perf_counter()
-    inner: list[Any] = []
-    boundary: list[Any] = []
-    outer: list[Any] = []
-    n_discarded = 0
-    n_classified = 0
+    done: list[tuple[Any, ...]] = []  # per level: (inner, outer, boundary parts, n_out, n)
     level = 0
     status = Status.PROVED
     message = "search completed"
     history: list[dict] = []
+    splits = callable(getattr(frontier, "split", None))
     bar = tqdm(total=None, desc=desc, unit="box", disable=progress is False,
                delay=0 if progress else 2.0, leave=False)
+    n_classified = 0
     try:
         while len(frontier):
             if n_classified + len(frontier) > max_boxes:
@@ -215,33 +275,48 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 break
             labels = np.asarray(classify(frontier), dtype=np.int8)
             n = len(frontier)
-            n_classified += n
             if on_level is not None:
                 on_level(level, frontier, labels)
-            is_in = labels == INNER
-            is_out = labels == OUTER
-            und = ~(is_in | is_out)
-            if is_in.any():
-                inner.append(frontier.take(is_in))
-            n_out = int(is_out.sum())
-            n_discarded += n_out
-            if keep_outer and n_out:
-                outer.append(frontier.take(is_out))
-            undecided = frontier.take(und)
+            # Everything of this level is computed before anything is recorded, so that an
+            # interruption leaves either the whole level or none of it in the result.
+            i_in = np.flatnonzero(labels == INNER)
+            i_out = np.flatnonzero(labels == OUTER)
+            i_und = np.flatnonzero((labels != INNER) & (labels != OUTER))
+            in_part = frontier.take(i_in) if i_in.size else None
+            out_part = frontier.take(i_out) if keep_outer and i_out.size else None
+            undecided = frontier.take(i_und)
             small = undecided.width() <= eps
-            if small.any():
-                boundary.append(undecided.take(small))
-            frontier = undecided.take(~small).bisect() if (~small).any() else undecided.take(
-                ~small)
-            history.append({"level": level, "classified": n, "inner": int(is_in.sum()),
-                            "outer": n_out, "boundary": int(small.sum())})
-            bar.update(n)
-            bar.set_postfix(level=level, frontier=len(frontier), refresh=False)
+            parts = [undecided.take(small)] if small.any() else []
+            grow = undecided.take(~small)
+            if not len(grow):
+                nxt = grow
+            elif splits:
+                nxt, stuck = grow.split()
+                if len(stuck):
+                    parts.append(stuck)  # too narrow for floating point: undecided for good
+            else:
+                nxt = grow.bisect()
+            n_bnd = sum(len(p) for p in parts)
+            # commit the level in one assignment statement
+            done, frontier, n_classified = done + [(in_part, out_part, parts, i_out.size, n)], \
+                nxt, n_classified + n
+            history.append({"level": level, "classified": n, "inner": int(i_in.size),
+                            "outer": int(i_out.size), "boundary": n_bnd})
             level += 1
+            if not bar.disable:
+                bar.update(n)
+                bar.set_postfix(level=level - 1, frontier=len(frontier), refresh=False)
     except KeyboardInterrupt:
         status, message = Status.BUDGET, "interrupted"
     finally:
         bar.close()
+    level = len(done)
+    inner = [d[0] for d in done if d[0] is not None]
+    outer = [d[1] for d in done if d[1] is not None]
+    boundary = [p for d in done for p in d[2]]
+    n_discarded = int(sum(d[3] for d in done))
+    n_classified = int(sum(d[4] for d in done))
+    history = history[:level]
     if len(frontier):
         boundary.append(frontier)  # unclassified leftovers are undecided: sound
     empty = frontier.take(np.zeros(len(frontier), dtype=bool))

@@ -19,15 +19,41 @@ __all__ = ["sivia", "image_classifier"]
 
 
 def _as_inclusion(f: Any, kind: str) -> InclusionFunction:
-    if isinstance(f, InclusionFunction):
-        return f
     if isinstance(f, ca.Function):
         if f.n_in() != 1 or f.n_out() != 1:
             raise DimensionError(
                 f"sivia needs a Function with one input and one output; '{f.name()}' has "
                 f"{f.n_in()} inputs and {f.n_out()} outputs (use casadi.vertcat to stack them)")
         return InclusionFunction(f, kind)
+    if isinstance(f, InclusionFunction):
+        if f.n_in != 1 or f.n_out != 1:
+            raise DimensionError(
+                f"sivia needs an inclusion function with one input and one output; "
+                f"'{f.fun.name()}' has {f.n_in} inputs and {f.n_out} outputs")
+        return f
     raise TypeError(f"f must be a casadi.Function or an InclusionFunction; got {type(f).__name__}")
+
+
+def _image_rows(F: InclusionFunction, lo: np.ndarray, hi: np.ndarray) -> list[tuple[Any, Any]]:
+    """Enclosures of the output components of F over the boxes ``lo``, ``hi`` (N, n).
+
+    One ``(lower, upper)`` pair per component, arrays of shape (N,) or scalars; a NaN bound
+    means "no information" (every comparison with it is False, so the box stays undecided).
+    The natural form runs the compiled evaluator on views of ``lo``, ``hi`` (its operations
+    never write into their operands), without packing the result into an (N, m, 2) array.
+    """
+    ev = getattr(F, "_eval", None)
+    pos = getattr(F, "_out_pos", None)
+    if ev is not None and pos is not None and (F.kind == "natural" or F.centered_fallback):
+        o: list[list[Any]] = [[None] * len(p) for p in pos]
+        with np.errstate(all="ignore"):
+            ev([lo.T], [hi.T], o)
+        rows: list[tuple[Any, Any]] = [(0.0, 0.0)] * F.size_out[0]  # structural zeros
+        for j, b in zip(pos[0], o[0], strict=True):
+            rows[int(j)] = b
+        return rows
+    img = F.evaluate_unchecked([np.stack([lo, hi], axis=-1)], lo.shape[0])[0]
+    return [(img[:, j, 0], img[:, j, 1]) for j in range(img.shape[1])]
 
 
 def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
@@ -42,33 +68,37 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
         if Y.dim != m:
             raise DimensionError(f"target Y has dimension {Y.dim}; f has {m} outputs")
         ylo, yhi = Y.lo, Y.hi
-        rows_lo = [j for j in range(m) if np.isfinite(ylo[j])]
-        rows_hi = [j for j in range(m) if np.isfinite(yhi[j])]
+        rows_lo = [(j, float(ylo[j])) for j in range(m) if np.isfinite(ylo[j])]
+        rows_hi = [(j, float(yhi[j])) for j in range(m) if np.isfinite(yhi[j])]
+        step = int(getattr(F, "chunk", 8192))
 
         def classify(fr: BoxFrontier) -> np.ndarray:
-            img = F.evaluate_unchecked([fr.boxes], len(fr))[0]
-            n = img.shape[0]
-            inner = np.ones(n, dtype=bool)
-            outer = np.zeros(n, dtype=bool)
-            for j in rows_lo:
-                lo_j, hi_j = img[:, j, 0], img[:, j, 1]
-                if open_target:
-                    inner &= lo_j > ylo[j]
-                    outer |= hi_j <= ylo[j]
-                else:
-                    inner &= lo_j >= ylo[j]
-                    outer |= hi_j < ylo[j]
-            for j in rows_hi:
-                lo_j, hi_j = img[:, j, 0], img[:, j, 1]
-                if open_target:
-                    inner &= hi_j < yhi[j]
-                    outer |= lo_j >= yhi[j]
-                else:
-                    inner &= hi_j <= yhi[j]
-                    outer |= lo_j > yhi[j]
-            labels = np.zeros(n, dtype=np.int8)
-            labels[inner] = INNER
-            labels[outer & ~inner] = OUTER
+            N = len(fr)
+            labels = np.zeros(N, dtype=np.int8)
+            for i0 in range(0, N, step):
+                i1 = min(i0 + step, N)
+                rows = _image_rows(F, fr.lo[i0:i1], fr.hi[i0:i1])
+                inner = np.ones(i1 - i0, dtype=bool)
+                outer = np.zeros(i1 - i0, dtype=bool)
+                for j, y in rows_lo:
+                    lo_j, hi_j = rows[j]
+                    if open_target:
+                        inner &= lo_j > y
+                        outer |= hi_j <= y
+                    else:
+                        inner &= lo_j >= y
+                        outer |= hi_j < y
+                for j, y in rows_hi:
+                    lo_j, hi_j = rows[j]
+                    if open_target:
+                        inner &= hi_j < y
+                        outer |= lo_j >= y
+                    else:
+                        inner &= hi_j <= y
+                        outer |= lo_j > y
+                lab = labels[i0:i1]
+                np.putmask(lab, inner, INNER)
+                np.putmask(lab, outer & ~inner, OUTER)
             return labels
 
         return classify
@@ -111,7 +141,8 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
         The target set. A Box may have infinite bounds (e.g. ``[0, inf)``).
     eps : float
         Boxes whose widest component is at most ``eps`` are not bisected further (relative
-        to the widths of ``X0`` when ``relative=True``).
+        to the widths of ``X0`` when ``relative=True``); neither are boxes whose widest
+        component holds no float strictly inside (both become boundary boxes).
     kind : {"natural", "centered"}
         Inclusion function used to enclose the images.
     open_target : bool
@@ -144,6 +175,9 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     """
     F = _as_inclusion(f, kind)
     n = F.size_in[0]
+    r = float(split_ratio)
+    if not 0.0 < r < 1.0:
+        raise ValueError(f"split_ratio must lie strictly between 0 and 1; got {split_ratio!r}")
     x0 = as_boxes(X0, n, "X0")
     if x0.shape[0] != 1:
         raise DimensionError(f"X0 must be a single box; got {x0.shape[0]} boxes")
@@ -156,11 +190,14 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     if relative:
         scale = np.where(domain.diam > 0, domain.diam, 1.0)
     classify = image_classifier(F, Y, open_target)
-    fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=split_ratio)
+    fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=r)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="sivia")
+    # Every box comes from bisecting X0 and lies in it: the domain is attached after the
+    # construction, which spares the check of every box against it.
     paving = Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
-                    outer=out.outer.boxes, domain=domain, n_discarded=out.n_discarded)
+                    outer=out.outer.boxes, n_discarded=out.n_discarded)
+    paving.domain = domain
     paving.status = out.status
     paving.message = out.message
     paving.elapsed = out.elapsed

@@ -1,0 +1,491 @@
+"""SIVIA (thesis Alg 4.1) on the Routh example E2 (Fig 4.1), set targets, limits, bad input."""
+
+import itertools
+from fractions import Fraction
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import casadi_cmpc as cm
+from casadi_cmpc.exceptions import DimensionError, UnboundedSetError
+from casadi_cmpc.sets.paving import box_volume, boxes_contain_points
+from casadi_cmpc.solvers.engine import (
+    INNER,
+    OUTER,
+    UNDECIDED,
+    BoxFrontier,
+    Status,
+    branch_and_bound,
+)
+from casadi_cmpc.solvers.sivia import _image_rows, image_classifier
+
+X0_ROUTH = cm.Box([-3, -3], [9, 9])
+Y_POS = cm.Box([0, 0, 0], [np.inf, np.inf, np.inf])
+AREA_ROUTH = 144.0
+
+
+def _routh_function():
+    p = ca.SX.sym("p", 2)
+    r = ca.vertcat(p[0] + p[1] + 2,
+                   (p[0] - 1) ** 2 + (p[1] - 1) ** 2 - 1,
+                   2 * (p[0] + 3) * (p[1] + 3) - 15)
+    return ca.Function("routh", [p], [r])
+
+
+def routh(P):
+    """r(p) at points (..., 2) -> (..., 3), in floating point."""
+    p1, p2 = P[..., 0], P[..., 1]
+    return np.stack([p1 + p2 + 2, (p1 - 1) ** 2 + (p2 - 1) ** 2 - 1,
+                     2 * (p1 + 3) * (p2 + 3) - 15], axis=-1)
+
+
+def routh_exact(p1, p2):
+    """r(p) with rational arithmetic (exact for float inputs)."""
+    a, b = Fraction(p1), Fraction(p2)
+    return (a + b + 2, (a - 1) ** 2 + (b - 1) ** 2 - 1, 2 * (a + 3) * (b + 3) - 15)
+
+
+def samples(boxes, k=7):
+    """A k x k grid in every box, corners included: (N, k*k, 2)."""
+    t = np.linspace(0.0, 1.0, k)
+    lo, hi = boxes[:, None, :, 0], boxes[:, None, :, 1]
+    g = np.array(list(itertools.product(t, t)))[None]  # (1, k*k, 2)
+    pts = lo + g * (hi - lo)
+    # the corners exactly (lo + 1 * (hi - lo) may round away from hi)
+    pts[:, 0] = boxes[:, :, 0]
+    pts[:, -1] = boxes[:, :, 1]
+    pts[:, k - 1] = np.stack([boxes[:, 0, 0], boxes[:, 1, 1]], axis=-1)
+    pts[:, k * (k - 1)] = np.stack([boxes[:, 0, 1], boxes[:, 1, 0]], axis=-1)
+    return pts
+
+
+def corners(boxes):
+    return [[(b[0, i], b[1, j]) for i in (0, 1) for j in (0, 1)] for b in boxes]
+
+
+def assert_covers(paving, domain_volume):
+    """inner, boundary and outside boxes tile the domain: volumes add up, no overlap."""
+    parts = [paving.inner, paving.boundary, paving.outer]
+    each = sum(float(box_volume(b).sum()) for b in parts if len(b))
+    union = paving.volume("inner") + paving.volume("boundary") + paving.volume("outside")
+    assert each == pytest.approx(domain_volume, rel=1e-12)
+    assert union == pytest.approx(domain_volume, rel=1e-12)
+    assert paving.n_discarded == len(paving.outer)
+
+
+@pytest.fixture(scope="module")
+def F_routh():
+    return cm.interval.inclusion(_routh_function())
+
+
+@pytest.fixture(scope="module")
+def routh_pavings(F_routh):
+    return {eps: cm.sivia(F_routh, X0_ROUTH, Y_POS, eps, open_target=True, progress=False)
+            for eps in (0.5, 0.1, 0.05)}
+
+
+# ----------------------------------------------------------------- E2, Fig 4.1
+@pytest.mark.parametrize("eps", [0.5, 0.1, 0.05])
+def test_routh_inner_boxes_are_stable(routh_pavings, eps):
+    P = routh_pavings[eps]
+    assert P.status == Status.PROVED and len(P.inner) > 0
+    assert (routh(samples(P.inner)) > 0).all()
+    if eps >= 0.1:  # exact rational check of every corner
+        for cs in corners(P.inner):
+            for c in cs:
+                assert all(v > 0 for v in routh_exact(*c))
+
+
+@pytest.mark.parametrize("eps", [0.5, 0.1, 0.05])
+def test_routh_outside_boxes_are_unstable(routh_pavings, eps):
+    P = routh_pavings[eps]
+    assert len(P.outer) > 0
+    r = routh(samples(P.outer))  # (N, k*k, 3)
+    # one component of r is <= 0 on the whole box
+    assert (r <= 0).all(axis=1).any(axis=1).all()
+    if eps >= 0.1:
+        for cs in corners(P.outer):
+            vals = [routh_exact(*c) for c in cs]
+            assert any(all(v[j] <= 0 for v in vals) for j in range(3))
+
+
+@pytest.mark.parametrize("eps", [0.5, 0.1, 0.05])
+def test_routh_paving_tiles_the_domain(routh_pavings, eps):
+    P = routh_pavings[eps]
+    assert_covers(P, AREA_ROUTH)
+    assert P.domain == X0_ROUTH
+    # boundary boxes are narrower than eps, the others came from bisection of X0
+    assert (np.diff(P.boundary, axis=-1).max(axis=(1, 2)) <= eps).all()
+
+
+def test_routh_refinement_shrinks_the_boundary(routh_pavings):
+    inner = [routh_pavings[e].volume("inner") for e in (0.5, 0.1, 0.05)]
+    bnd = [routh_pavings[e].volume("boundary") for e in (0.5, 0.1, 0.05)]
+    assert inner[0] < inner[1] < inner[2]
+    assert bnd[0] > bnd[1] > bnd[2]
+    assert bnd[2] < 2.0
+
+
+def test_routh_random_points_agree_with_the_labels(routh_pavings):
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-3, 9, size=(4000, 2))
+    stable = (routh(pts) > 0).all(axis=1)
+    for P in routh_pavings.values():
+        in_inner = boxes_contain_points(P.inner, pts).any(axis=0)
+        in_outer = boxes_contain_points(P.outer, pts).any(axis=0)
+        in_bnd = boxes_contain_points(P.boundary, pts).any(axis=0)
+        assert (in_inner | in_outer | in_bnd).all()
+        assert stable[in_inner].all()
+        assert not stable[in_outer].any()
+
+
+def test_routh_fig41_box_counts(routh_pavings):
+    # Fig 4.1 (eps = 0.5) with midpoint bisection and the natural inclusion; regression
+    # figures of this deterministic run
+    P = routh_pavings[0.5]
+    assert (len(P.inner), len(P.boundary), len(P.outer)) == (55, 83, 46)
+    assert P.volume("inner") == pytest.approx(105.890625)
+    assert P.volume("boundary") == pytest.approx(11.671875)
+
+
+def test_routh_from_casadi_function_equals_precompiled(F_routh, routh_pavings):
+    P = cm.sivia(_routh_function(), X0_ROUTH, Y_POS, 0.5, open_target=True, progress=False)
+    Q = routh_pavings[0.5]
+    for a, b in ((P.inner, Q.inner), (P.boundary, Q.boundary), (P.outer, Q.outer)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_routh_centered_is_at_least_as_tight(routh_pavings):
+    P = cm.sivia(_routh_function(), X0_ROUTH, Y_POS, 0.1, kind="centered",
+                 open_target=True, progress=False)
+    Q = routh_pavings[0.1]
+    assert (routh(samples(P.inner)) > 0).all()
+    assert P.volume("inner") >= Q.volume("inner")
+    assert P.volume("boundary") <= Q.volume("boundary")
+    assert_covers(P, AREA_ROUTH)
+
+
+def test_split_ratio_049(F_routh, routh_pavings):
+    P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.1, open_target=True, split_ratio=0.49,
+                 progress=False)
+    assert P.status == Status.PROVED
+    assert (routh(samples(P.inner)) > 0).all()
+    assert (routh(samples(P.outer)) <= 0).all(axis=1).any(axis=1).all()
+    assert_covers(P, AREA_ROUTH)
+    Q = routh_pavings[0.1]
+    assert len(P.inner) != len(Q.inner)  # a different (off-centre) subpaving
+    assert P.volume("boundary") == pytest.approx(Q.volume("boundary"), rel=0.1)
+    # the first cut is at 49 % of the first component
+    assert np.isin(-3 + 0.49 * 12, np.concatenate([P.inner, P.boundary, P.outer])[:, 0, :])
+
+
+def test_relative_eps_matches_a_rescaled_problem(routh_pavings):
+    # p2 = q2 / 10: the same problem on [-3, 9] x [-30, 90]; eps relative to the widths
+    q = ca.SX.sym("q", 2)
+    p = ca.vertcat(q[0], q[1] / 10)
+    r = ca.vertcat(p[0] + p[1] + 2, (p[0] - 1) ** 2 + (p[1] - 1) ** 2 - 1,
+                   2 * (p[0] + 3) * (p[1] + 3) - 15)
+    f = ca.Function("routh_scaled", [q], [r])
+    X0 = cm.Box([-3, -30], [9, 90])
+    P = cm.sivia(f, X0, Y_POS, 0.5 / 12, relative=True, open_target=True, progress=False)
+    Q = routh_pavings[0.5]
+    assert (len(P.inner), len(P.boundary), len(P.outer)) == (
+        len(Q.inner), len(Q.boundary), len(Q.outer))
+    assert P.volume("inner") == pytest.approx(10 * Q.volume("inner"))
+    back = P.inner * np.array([1.0, 0.1])[None, :, None]
+    assert (routh(samples(back)) > 0).all()
+    assert_covers(P, 12 * 120)
+    # without relative=True the same eps bisects the long side much further
+    R = cm.sivia(f, X0, Y_POS, 0.5 / 12, open_target=True, progress=False)
+    assert len(R.boundary) > len(P.boundary)
+
+
+def test_closed_and_open_targets():
+    x = ca.SX.sym("x")
+    f = ca.Function("id", [x], [x])
+    X0 = cm.Box([0.0], [2.0])
+    closed = cm.sivia(f, X0, cm.Box([1.0], [np.inf]), 0.1, progress=False)
+    opened = cm.sivia(f, X0, cm.Box([1.0], [np.inf]), 0.1, open_target=True, progress=False)
+    # [1, 2] is inside the closed target, [0, 1) outside it; x = 1 decides nothing for the
+    # box below 1 (closed) or above 1 (open)
+    assert closed.volume("inner") == pytest.approx(1.0)
+    assert closed.boundary[:, 0, 1].tolist() == [1.0]
+    assert opened.volume("outside") == pytest.approx(1.0)
+    assert opened.boundary[:, 0, 0].tolist() == [1.0]
+    assert opened.outer[:, 0, 1].max() == 1.0 and closed.inner[:, 0, 0].min() == 1.0
+
+
+# ---------------------------------------------------------------- set targets
+HEXAGON = cm.Polytope.from_vertices([[1, 0], [0.5, 0.9], [-0.5, 0.9], [-1, 0], [-0.5, -0.9],
+                                     [0.5, -0.9]])
+
+
+def _in_polytope_exact(P, pts):
+    A = [[Fraction(a) for a in row] for row in P.A]
+    b = [Fraction(v) for v in P.b]
+    out = []
+    for x in pts:
+        xs = [Fraction(v) for v in x]
+        out.append(all(sum(a * v for a, v in zip(row, xs, strict=True)) <= bi
+                       for row, bi in zip(A, b, strict=True)))
+    return np.array(out)
+
+
+def _shoelace(V):
+    c = V.mean(axis=0)
+    V = V[np.argsort(np.arctan2(V[:, 1] - c[1], V[:, 0] - c[0]))]
+    x, y = V[:, 0], V[:, 1]
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def test_polytope_target_identity():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("id2", [x], [x])
+    X0 = cm.Box([-1.5, -1.5], [1.5, 1.5])
+    P = cm.sivia(f, X0, HEXAGON, 0.05, progress=False)
+    assert P.status == Status.PROVED
+    # inner boxes: their four vertices are in the (convex) hexagon, exactly
+    V = np.array([c for cs in corners(P.inner) for c in cs])
+    assert _in_polytope_exact(HEXAGON, V).all()
+    # outside boxes: no sample lies in the hexagon
+    S = samples(P.outer, k=5).reshape(-1, 2)
+    assert not HEXAGON.contains(S).any()
+    assert_covers(P, 9.0)
+    area = _shoelace(HEXAGON.vertices())
+    assert P.volume("inner") <= area <= P.volume("inner") + P.volume("boundary")
+    assert P.volume("inner") > 0.85 * area
+
+
+def test_polytope_target_nonlinear_image():
+    # {x : (x1 + x2^2, x2) in hexagon}
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("bend", [x], [ca.vertcat(x[0] + x[1] ** 2, x[1])])
+    P = cm.sivia(f, cm.Box([-2, -1], [2, 1]), HEXAGON, 0.05, progress=False)
+    img = samples(P.inner, k=5)
+    img = np.stack([img[..., 0] + img[..., 1] ** 2, img[..., 1]], axis=-1).reshape(-1, 2)
+    assert HEXAGON.contains(img, tol=1e-12).all()
+    out = samples(P.outer, k=5)
+    out = np.stack([out[..., 0] + out[..., 1] ** 2, out[..., 1]], axis=-1).reshape(-1, 2)
+    assert not HEXAGON.contains(out).any()
+    assert_covers(P, 8.0)
+
+
+def test_polytope_union_target():
+    A = cm.Polytope.from_box(cm.Box([-1, -1], [0.2, 1]))
+    B = cm.Polytope.from_vertices([[0, -1], [1.2, 0], [0, 1]])
+    U = cm.PolytopeUnion([A, B])
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("id2", [x], [x])
+    P = cm.sivia(f, cm.Box([-1.5, -1.5], [1.5, 1.5]), U, 0.05, progress=False)
+    assert P.status == Status.PROVED and len(P.inner) > 0
+    S = samples(P.inner, k=5).reshape(-1, 2)
+    assert (A.contains(S, tol=1e-9) | B.contains(S, tol=1e-9)).all()
+    # boxes straddling x1 = 0.2 are inside the union without being inside one member
+    straddle = (P.inner[:, 0, 0] < 0.2) & (P.inner[:, 0, 1] > 0.2)
+    assert straddle.any()
+    S = samples(P.outer, k=5).reshape(-1, 2)
+    assert not (A.contains(S) | B.contains(S)).any()
+    assert_covers(P, 9.0)
+    area = 1.2 * 2 + 0.5 * 2 * 1.2 - 0.5 * 2 * 0.2 * (1 - 0.2 / 1.2)  # |A| + |B| - |A ∩ B|
+    assert P.volume("inner") <= area <= P.volume("inner") + P.volume("boundary")
+
+
+def test_structural_zero_and_constant_outputs():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("zc", [x], [ca.vertcat(x[0], ca.SX(1, 1), 2.0)])
+    X0 = cm.Box([-1, -1], [1, 1])
+    P = cm.sivia(f, X0, cm.Box([0, -1, 1], [2, 1, 3]), 0.1, progress=False)
+    assert P.volume("inner") == pytest.approx(2.0)  # x0 in [0, 1]
+    assert P.volume("outside") + P.volume("boundary") == pytest.approx(2.0)
+    assert (P.boundary[:, 0, 1] == 0.0).all()
+    Q = cm.sivia(f, X0, cm.Box([0, 0.5, 1], [2, 1, 3]), 0.1, progress=False)  # 0 not in Y
+    assert Q.volume("outside") == pytest.approx(4.0) and Q.levels == 1
+
+
+def test_undefined_function_parts_stay_undecided():
+    x = ca.SX.sym("x")
+    f = ca.Function("root", [x], [ca.sqrt(x) - 1])
+    P = cm.sivia(f, cm.Box([-1.0], [4.0]), cm.Box([0.0], [np.inf]), 0.01, progress=False)
+    assert (P.inner[:, 0, 0] >= 1.0).all()
+    assert (P.outer[:, 0, 0] >= 0.0).all() and (P.outer[:, 0, 1] <= 1.0).all()
+    assert P.volume("boundary") > 1.0  # [-1, 0] is never decided
+    assert_covers(P, 5.0)
+
+
+def test_fast_image_path_matches_evaluate(F_routh):
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(-3, 9, (500, 2))
+    hi = lo + rng.uniform(0, 2, (500, 2))
+    rows = _image_rows(F_routh, lo, hi)
+    img = F_routh.evaluate_unchecked([np.stack([lo, hi], axis=-1)], 500)[0]
+    for j, (l, h) in enumerate(rows):
+        np.testing.assert_array_equal(l, img[:, j, 0])
+        np.testing.assert_array_equal(h, img[:, j, 1])
+    # the frontier itself is left untouched
+    assert (hi >= lo).all() and lo.min() >= -3
+
+
+# -------------------------------------------------------- limits, interruption
+def test_max_boxes_stops_with_sound_leftovers(F_routh):
+    P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.05, open_target=True, max_boxes=200,
+                 progress=False)
+    assert P.status == Status.BUDGET and "max_boxes" in P.message
+    assert P.n_classified <= 200
+    assert (routh(samples(P.inner)) > 0).all()
+    assert (routh(samples(P.outer)) <= 0).all(axis=1).any(axis=1).all()
+    assert_covers(P, AREA_ROUTH)
+    # leftovers are reported as boundary although wider than eps
+    assert np.diff(P.boundary, axis=-1).max() > 0.05
+
+
+def test_time_limit_stops_with_sound_leftovers(F_routh):
+    P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.005, open_target=True, time_limit=0.0,
+                 progress=False)
+    assert P.status == Status.BUDGET and "time_limit" in P.message
+    assert len(P.inner) == 0
+    assert_covers(P, AREA_ROUTH)
+    np.testing.assert_array_equal(P.boundary, X0_ROUTH.as_array()[None])
+
+
+def test_keyboard_interrupt_in_classifier_returns_partial_result(F_routh):
+    inner = image_classifier(F_routh, Y_POS, open_target=True)
+    calls = []
+
+    def classify(fr):
+        calls.append(len(fr))
+        if len(calls) == 4:  # level 3
+            raise KeyboardInterrupt
+        return inner(fr)
+
+    fr = BoxFrontier.from_boxes(X0_ROUTH.as_array()[None])
+    out = branch_and_bound(fr, classify, 0.05, progress=False)
+    assert out.status == Status.BUDGET and out.message == "interrupted"
+    assert out.levels == 3 and len(out.history) == 3
+    assert len(out.boundary) == calls[3]  # the unclassified frontier of level 3
+    P = cm.Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
+                  outer=out.outer.boxes, domain=X0_ROUTH, n_discarded=out.n_discarded)
+    assert_covers(P, AREA_ROUTH)
+    assert (routh(samples(P.inner)) > 0).all()
+
+
+def test_keyboard_interrupt_while_splitting_keeps_a_tiling(F_routh):
+    class Fragile(BoxFrontier):
+        splits = 0
+
+        def take(self, mask):
+            b = super().take(mask)
+            return Fragile(b.lo, b.hi, b.scale, b.split_ratio)
+
+        def split(self):
+            Fragile.splits += 1
+            if Fragile.splits == 3:
+                raise KeyboardInterrupt
+            c, s = super().split()
+            return Fragile(c.lo, c.hi, c.scale, c.split_ratio), s
+
+    fr = Fragile(np.array([[-3.0, -3.0]]), np.array([[9.0, 9.0]]))
+    out = branch_and_bound(fr, image_classifier(F_routh, Y_POS, True), 0.05, progress=False)
+    assert out.status == Status.BUDGET and out.levels == 2
+    P = cm.Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
+                  outer=out.outer.boxes, n_discarded=out.n_discarded)
+    assert_covers(P, AREA_ROUTH)  # no box of the interrupted level counted twice
+
+
+def test_engine_labels_and_history():
+    fr = BoxFrontier.from_boxes(np.array([[[0.0, 1.0]]]))
+
+    def classify(f):
+        lab = np.full(len(f), UNDECIDED)
+        lab[f.lo[:, 0] >= 0.5] = INNER
+        lab[f.hi[:, 0] <= 0.25] = OUTER
+        return lab
+
+    out = branch_and_bound(fr, classify, 0.1, progress=False)
+    assert out.status == Status.PROVED
+    assert [h["classified"] for h in out.history] == [1, 2, 2, 2, 4]
+    assert out.inner.boxes.tolist() == [[[0.5, 1.0]]]
+    assert out.outer.boxes.tolist() == [[[0.0, 0.25]]]
+    # [0.25, 0.5] is never decided: bisected down to widths <= eps
+    assert sorted(out.boundary.boxes[:, 0].tolist()) == [[0.25, 0.3125], [0.3125, 0.375],
+                                                 [0.375, 0.4375], [0.4375, 0.5]]
+    assert out.n_discarded == 1
+    none_kept = branch_and_bound(fr, classify, 0.1, keep_outer=False, progress=False)
+    assert len(none_kept.outer) == 0 and none_kept.n_discarded == 1
+
+
+def test_boxes_too_narrow_to_split_become_boundary():
+    # eps below the float resolution: the boxes at the threshold cannot be split further
+    x = ca.SX.sym("x")
+    f = ca.Function("id", [x], [x])
+    a = 1.0
+    b = a
+    for _ in range(8):
+        b = np.nextafter(b, 2.0)
+    c = (a + b) / 2 + 1e-17
+    P = cm.sivia(f, cm.Box([a], [b]), cm.Box([c], [np.inf]), 1e-300, open_target=True,
+                 max_boxes=10_000, progress=False)
+    assert P.status == Status.PROVED and P.n_classified < 100
+    assert len(P.boundary) >= 1 and (P.boundary[:, 0, 0] <= c).all()
+    assert_covers(P, b - a)
+
+
+def test_frontier_split_and_bisect():
+    fr = BoxFrontier(np.array([[0.0, 0.0], [0.0, 0.0]]), np.array([[1.0, 2.0], [2.0, 2.0]]))
+    assert fr.width().tolist() == [2.0, 2.0]
+    ch, stuck = fr.split()
+    assert len(stuck) == 0
+    # widest component, ties to the lowest index
+    assert ch.boxes.tolist() == [[[0, 1], [0, 1]], [[0, 1], [0, 2]],
+                                 [[0, 1], [1, 2]], [[1, 2], [0, 2]]]
+    point = BoxFrontier(np.array([[1.0]]), np.array([[1.0]]))
+    ch, stuck = point.split()
+    assert len(ch) == 0 and len(stuck) == 1
+    assert point.bisect().boxes.tolist() == [[[1.0, 1.0]]]
+    huge = BoxFrontier(np.array([[-1e308]]), np.array([[1.7e308]]), split_ratio=0.49)
+    ch, stuck = huge.split()
+    assert len(stuck) == 0 and np.isfinite(ch.lo).all() and np.isfinite(ch.hi).all()
+    sel = fr.take(np.array([False, True]))
+    assert sel.boxes.tolist() == fr.take(np.array([1])).boxes.tolist()
+
+
+# ------------------------------------------------------------------ bad input
+def test_bad_inputs(F_routh):
+    f = _routh_function()
+    with pytest.raises(UnboundedSetError):
+        cm.sivia(f, cm.Box([-3, -3], [9, np.inf]), Y_POS, 0.5)
+    for eps in (0.0, -1.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match="eps"):
+            cm.sivia(f, X0_ROUTH, Y_POS, eps)
+    x, y = ca.SX.sym("x", 2), ca.SX.sym("y")
+    with pytest.raises(DimensionError, match="one input"):
+        cm.sivia(ca.Function("two", [x, y], [x[0] + y]), X0_ROUTH, cm.Box([0], [1]), 0.5)
+    with pytest.raises(DimensionError, match="one input"):
+        cm.sivia(ca.Function("two_out", [x], [x[0], x[1]]), X0_ROUTH, cm.Box([0], [1]), 0.5)
+    with pytest.raises(DimensionError, match="one input"):
+        cm.sivia(cm.interval.inclusion(ca.Function("two", [x, y], [x[0] + y])), X0_ROUTH,
+                 cm.Box([0], [1]), 0.5)
+    with pytest.raises(DimensionError, match="target Y has dimension 2"):
+        cm.sivia(F_routh, X0_ROUTH, cm.Box([0, 0], [1, 1]), 0.5)
+    with pytest.raises(DimensionError, match="target Y has dimension 2"):
+        cm.sivia(F_routh, X0_ROUTH, HEXAGON, 0.5)
+    with pytest.raises(DimensionError, match="X0"):
+        cm.sivia(F_routh, cm.Box([-3, -3, -3], [9, 9, 9]), Y_POS, 0.5)
+    with pytest.raises(TypeError, match="Y must be"):
+        cm.sivia(F_routh, X0_ROUTH, [[0, 1]] * 3, 0.5)
+    with pytest.raises(TypeError, match="f must be"):
+        cm.sivia(lambda p: p, X0_ROUTH, Y_POS, 0.5)
+    for r in (0.0, 1.0, 1.5, np.nan):
+        with pytest.raises(ValueError, match="split_ratio"):
+            cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.5, split_ratio=r)
+
+
+def test_plot_draws_three_categories(routh_pavings):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ax = routh_pavings[0.5].plot(show_outer=True)
+    assert len(ax.collections) == 3
+    plt.close(ax.figure)
