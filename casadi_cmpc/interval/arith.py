@@ -246,10 +246,11 @@ def mulci(al, ah, cl, ch):
 
 
 def sq(al, ah):
-    with np.errstate(all="ignore"):
-        mig = _max(_max(al, -ah), 0.0)  # distance of the interval from 0 (NaN propagates)
-        mag = _max(-al, ah)
-        return _max(dnm(mig * mig), 0.0), upm(mag * mag)
+    mig = _max(_max(al, -ah), 0.0)  # distance of the interval from 0 (NaN propagates)
+    mag = _max(-al, ah)
+    lo = _dnm_(mig * mig)
+    lo = _max(lo, 0.0, out=lo) if isinstance(lo, np.ndarray) else _max(lo, 0.0)
+    return lo, _upm_(mag * mag)
 
 
 def div(al, ah, bl, bh):
