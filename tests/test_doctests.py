@@ -15,6 +15,9 @@ MODULES = [
     "casadi_cmpc.sets.zonotope",
     "casadi_cmpc.solvers.sivia",
     "casadi_cmpc.solvers.minimize",
+    "casadi_cmpc.solvers.quantified",
+    "casadi_cmpc.solvers.minimax",
+    "casadi_cmpc.interval.modal",
 ]
 
 

@@ -4,7 +4,7 @@ Interval batches are float arrays of shape ``(N, d, 2)``: ``[..., 0]`` lower bou
 ``[..., 1]`` upper bounds.
 """
 
-from . import arith  # noqa: F401
+from . import arith, modal  # noqa: F401
 from .compiler import *  # noqa: F401,F403
 from .compiler import __all__ as _compiler_all
 from .ops import *  # noqa: F401,F403

@@ -1,0 +1,390 @@
+"""Constrained minimax optimisation via modal intervals (thesis §5.1.6, Alg 5.3).
+
+Solves
+
+    V* = min { max_{w ∈ W} f(u, w)  :  u ∈ U,  g(u, w) <= 0 for all w ∈ W }
+
+by interval branch and bound over ``u``: one classifier plugged into
+:func:`~casadi_cmpc.solvers.engine.branch_and_bound` bounds ``max_w f`` from below on whole
+u-boxes with the outer approximation of the semantic extension ``f*(U, Dual W)`` (thesis
+Alg 5.3 step 14) and from above at points with its inner approximation (step 15), and
+classifies the constraints with outer approximations of ``g*`` (steps 4-7).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .._validate import as_boxes
+from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
+from ..interval.modal import SemanticExtension, _partition
+from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
+
+__all__ = ["minimax", "MinimaxResult"]
+
+_METHODS = ("auto", "alg5.3")
+_OPTION_KEYS = ("w_depth", "w_depth_final", "mean_value")
+_VERTEX_MAX = 16  # vertices of W used as extra points of the lower bound when 2**l <= this
+
+
+@dataclass(frozen=True, eq=False)
+class MinimaxResult:
+    """Result of :func:`minimax`: a certified bracket ``lower <= V* <= upper``.
+
+    Attributes
+    ----------
+    success : bool
+        ``status == Status.PROVED``.
+    status : Status
+        ``PROVED``: the search ran to completion and both bounds are finite.
+        ``BUDGET``: a limit or an interruption stopped the search; the bracket is still
+        certified (the leftover boxes are among the candidates).
+        ``DISPROVED``: every u-box was proven to violate a constraint for some w: no u in U
+        satisfies ``g(u, w) <= 0`` for all w (``lower = upper = inf``, ``u is None``).
+        ``UNDECIDED``: no feasible u could be certified (``upper = inf``).
+        ``NUMERICAL``: the enclosure of ``f`` is unbounded below on a candidate box
+        (``lower = -inf``).
+    message : str
+        What was proven, in words.
+    method : str
+        ``"alg5.3"``.
+    lower : float
+        Certified: every ``u ∈ U`` with ``g(u, w) <= 0`` for all ``w ∈ W`` has
+        ``max_{w ∈ W} f(u, w) >= lower``.
+    upper : float
+        Certified: ``max_{w ∈ W} f(u, w) <= upper`` at the returned ``u``, which is proven
+        feasible; hence ``V* <= upper`` (``inf`` when no feasible u was certified).
+    u : ndarray, shape (m,), or None
+        The best certified point (``u_feasible``), or None.
+    u_feasible : bool
+        True when ``u`` is proven to satisfy ``g(u, w) <= 0`` for every ``w ∈ W``.
+    w : ndarray, shape (l,), or None
+        A worst-case disturbance for ``u`` found by sampling (a guess, not certified).
+    fun : float
+        Same as ``upper``.
+    candidates : ndarray, shape (N, m, 2)
+        u-boxes that may contain minimax solutions: every solution lies in their union.
+    nit : int
+        Branch-and-bound levels.
+    n_boxes : int
+        u-boxes classified.
+    elapsed : float
+        Wall-clock time in seconds.
+    """
+
+    success: bool
+    status: Status
+    message: str
+    method: str
+    lower: float
+    upper: float
+    u: np.ndarray | None
+    u_feasible: bool
+    w: np.ndarray | None
+    fun: float
+    candidates: np.ndarray
+    nit: int
+    n_boxes: int
+    elapsed: float
+
+    @property
+    def width(self) -> float:
+        """Width ``upper - lower`` of the certified bracket."""
+        return float(self.upper - self.lower)
+
+    def __repr__(self) -> str:
+        u = None if self.u is None else np.array2string(self.u, precision=6)
+        return (f"MinimaxResult(status={self.status.name}, lower={self.lower:.10g}, "
+                f"upper={self.upper:.10g}, u={u}, candidates={self.candidates.shape[0]}, "
+                f"nit={self.nit}, n_boxes={self.n_boxes}, elapsed={self.elapsed:.3g})")
+
+
+def _check_fun(fun: Any, name: str, m: int, l: int, scalar: bool) -> ca.Function:
+    if not isinstance(fun, ca.Function):
+        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
+    if fun.n_in() != 2 or fun.n_out() != 1:
+        raise DimensionError(
+            f"{name} must take (u, w) and have one output; '{fun.name()}' has {fun.n_in()} "
+            f"inputs and {fun.n_out()} outputs")
+    if fun.numel_in(0) != m or fun.numel_in(1) != l:
+        raise DimensionError(
+            f"{name} takes inputs of {fun.numel_in(0)} and {fun.numel_in(1)} elements but U "
+            f"has dimension {m} and W dimension {l}")
+    if scalar and fun.numel_out(0) != 1:
+        raise DimensionError(f"{name} must be scalar; '{fun.name()}' has "
+                             f"{fun.numel_out(0)} outputs")
+    return fun
+
+
+def _single_box(data: Any, name: str) -> np.ndarray:
+    b = as_boxes(data, None, name)
+    if b.shape[0] != 1:
+        raise DimensionError(f"{name} must be a single box; got {b.shape[0]} boxes")
+    if not np.isfinite(b).all():
+        raise UnboundedSetError(f"{name} must be bounded; got {b[0].tolist()}")
+    return b[0]
+
+
+def _thin(points: np.ndarray) -> np.ndarray:
+    return np.stack([points, points], axis=-1)
+
+
+class _Minimax:
+    """State of one minimax search: the extensions, the W partitions, the certified bound."""
+
+    def __init__(self, f: ca.Function, g: ca.Function | None, U: np.ndarray, W: np.ndarray,
+                 w_depth: int, w_depth_final: int, mean_value: bool) -> None:
+        self.fext = SemanticExtension(f, mean_value=mean_value)
+        self.gext = None if g is None else SemanticExtension(g, mean_value=mean_value)
+        self.U, self.W = U, W
+        self.m, self.l = U.shape[0], W.shape[0]
+        self.imp_w = np.zeros(self.m + self.l, dtype=bool)
+        self.imp_w[self.m:] = True
+        self.cells = self._cells(w_depth)
+        self.cells_final = self._cells(w_depth_final)
+        pts = [np.clip(0.5 * W[:, 0] + 0.5 * W[:, 1], W[:, 0], W[:, 1])]
+        if 2 ** self.l <= _VERTEX_MAX:
+            bits = np.array(np.meshgrid(*[[0, 1]] * self.l, indexing="ij")).reshape(self.l, -1).T
+            pts.extend(np.where(bits == 1, W[:, 1], W[:, 0]))
+        self.points = _thin(np.array(pts))  # thin cells: extra points for the lower bound
+        self.upper = np.inf
+        self.u: np.ndarray | None = None
+
+    def _cells(self, depth: int) -> np.ndarray:
+        allowed = np.ones((1, self.l), dtype=bool)
+        return _partition(self.W[None], allowed, depth)[0]  # (K, l, 2)
+
+    def _pairs(self, ub: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Joint boxes (u-box, w-cell) for every u-box and cell: (N*K, m+l, 2)."""
+        N, K = ub.shape[0], cells.shape[0]
+        uu = np.repeat(ub, K, axis=0)
+        ww = np.tile(cells, (N, 1, 1))
+        return np.concatenate([uu, ww], axis=1)
+
+    def lower_bounds(self, ub: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lb of min_{u ∈ box} max_w f, proven infeasible) for u-boxes (N, m, 2)."""
+        N = ub.shape[0]
+        allc = np.concatenate([cells, self.points])
+        Z = self._pairs(ub, allc)
+        K = allc.shape[0]
+        r = self.fext.bounds_unchecked(Z, self.imp_w, outer=True, inner=False)
+        lb = r["outer_lo"][:, 0].reshape(N, K).max(axis=1)
+        infeasible = np.zeros(N, dtype=bool)
+        if self.gext is not None:
+            rg = self.gext.bounds_unchecked(Z, self.imp_w, outer=True, inner=False)
+            # outer lower bound of g_j*(box, Dual W_k) > 0: ∀u ∈ box ∃w ∈ W_k: g_j(u, w) > 0
+            infeasible = (rg["outer_lo"] > 0).any(axis=1).reshape(N, K).any(axis=1)
+        return lb, infeasible
+
+    def point_bounds(self, pts: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(ub of max_w f(u, w), proven feasible) at points u (N, m); cells cover W."""
+        N, K = pts.shape[0], cells.shape[0]
+        Z = self._pairs(_thin(pts), cells)
+        r = self.fext.bounds_unchecked(Z, self.imp_w, outer=False, inner=True)
+        # inner lower bound of f*(u, Dual W_k) is >= max_{w ∈ W_k} f(u, w)
+        ub = r["inner_lo"][:, 0].reshape(N, K).max(axis=1)
+        ub = np.where(np.isnan(ub), np.inf, ub)
+        feasible = np.isfinite(ub)
+        if self.gext is not None:
+            rg = self.gext.bounds_unchecked(Z, self.imp_w, outer=False, inner=True)
+            feasible &= (rg["inner_lo"] <= 0).all(axis=1).reshape(N, K).all(axis=1)
+        return ub, feasible
+
+    def certify(self, pts: np.ndarray, cells: np.ndarray) -> None:
+        if pts.shape[0] == 0:
+            return
+        pts = np.clip(pts, self.U[:, 0], self.U[:, 1])
+        ub, ok = self.point_bounds(pts, cells)
+        if not ok.any():
+            return
+        k = int(np.argmin(np.where(ok, ub, np.inf)))
+        if ub[k] < self.upper:
+            self.upper = float(ub[k])
+            self.u = pts[k].copy()
+
+    def classify(self, fr: BoxFrontier) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            ub = fr.boxes
+            lb, infeasible = self.lower_bounds(ub, self.cells)
+            live = ~infeasible
+            if live.any():
+                mid = np.clip(0.5 * fr.lo[live] + 0.5 * fr.hi[live], fr.lo[live], fr.hi[live])
+                self.certify(mid, self.cells)
+            labels = np.full(len(fr), UNDECIDED, dtype=np.int8)
+            labels[infeasible | (lb > self.upper)] = OUTER
+            return labels
+
+    def worst_w(self, u: np.ndarray) -> np.ndarray:
+        """A maximiser of f(u, .) over a grid of W (a guess)."""
+        k = max(2, int(round(4096 ** (1.0 / max(self.l, 1)))))
+        k = min(k, 65)
+        axes = [np.linspace(lo, hi, k) for lo, hi in self.W]
+        grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(self.l, -1).T
+        Z = np.concatenate([np.repeat(_thin(u[None]), grid.shape[0], axis=0), _thin(grid)],
+                           axis=1)
+        vals = self.fext.evaluate_unchecked(Z)[:, 0]
+        mid = 0.5 * vals[:, 0] + 0.5 * vals[:, 1]
+        return grid[int(np.argmax(np.where(np.isfinite(mid), mid, -np.inf)))]
+
+
+def minimax(f: ca.Function, U: Any, W: Any, eps: float,
+            constraints: ca.Function | None = None, *, method: str = "auto",
+            options: dict[str, Any] | None = None, max_boxes: int = 1_000_000,
+            time_limit: float | None = None, progress: bool | None = None) -> MinimaxResult:
+    """Certified constrained minimax: ``min_u max_w f(u, w)`` s.t. ``g(u, w) <= 0`` for all w.
+
+    Thesis §5.1.6, Alg 5.3, as one interval branch and bound over u (see Notes).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        Continuous scalar SX Function of ``(u, w)``.
+    U : Box or array_like, shape (m, 2)
+        Decision box (bounded).
+    W : Box or array_like, shape (l, 2)
+        Disturbance box (bounded).
+    eps : float
+        u-boxes whose widest component is at most ``eps`` are not bisected (candidates).
+    constraints : casadi.Function, optional
+        Continuous SX Function of ``(u, w)`` with a vector output ``g``; ``u`` is feasible when
+        ``g(u, w) <= 0`` for **every** ``w ∈ W``.
+    method : {"auto", "alg5.3"}
+        Only ``"alg5.3"`` (the branch and bound of the Notes).
+    options : dict, optional
+        ``w_depth`` (int, default ``min(3 l, 9)``): rounds of bisection of W into the cells
+        used during the search; ``w_depth_final`` (int, default ``w_depth + 3``): finer cells
+        for the final bounds; ``mean_value`` (bool, default True). Unknown keys warn.
+    max_boxes, time_limit : optional
+        Limits; a stopped search keeps its bracket certified.
+    progress : bool or None
+        tqdm progress bar (None: only for searches longer than 2 s).
+
+    Returns
+    -------
+    MinimaxResult
+        ``lower``, ``upper`` (certified bracket on ``V*``), ``u`` (proven feasible, with
+        ``max_w f(u, w) <= upper``), ``w`` (a worst case for ``u``, not certified),
+        ``candidates``, ``status``, ``message``.
+
+    Notes
+    -----
+    Let ``φ(u) = max_{w ∈ W} f(u, w)`` and ``S = {u ∈ U : g(u, w) <= 0 ∀w ∈ W}``. For a
+    partition ``{W_k}`` of W (plus a few points of W: its centre and vertices), the semantic
+    extension with u proper and w improper gives, on every u-box ``B``,
+
+    * ``φ(u) >= max_k Lb Outer(f*(B, Dual W_k))`` for all ``u ∈ B`` (thesis (5.16), Alg 5.3
+      step 14): the lower bound;
+    * ``Lb Outer(g_j*(B, Dual W_k)) > 0`` proves ``∀u ∈ B ∃w: g_j(u, w) > 0``: B holds no
+      feasible point and is discarded (steps 4-5);
+
+    and, at the midpoint ``u`` of each box,
+
+    * ``φ(u) <= max_k Lb Inner(f*(u, Dual W_k))`` (thesis (5.15), step 15) and
+      ``max_k Lb Inner(g_j*(u, Dual W_k)) <= 0`` proves ``u ∈ S``: the best such bound is the
+      certified ``upper``.
+
+    Boxes whose lower bound exceeds ``upper`` are discarded; the others, once narrower than
+    ``eps``, are the candidates and ``lower`` is the least lower bound over them (recomputed
+    with the finer cells). Both bounds are rigorous (outward rounding throughout).
+
+    Differences from the thesis: Alg 5.3 first computes an inner approximation ``Σ⁻`` of
+    ``S`` and then a bracket from one point per box of ``Σ⁻``; it calls the result an
+    approximation, since the bracket is only valid over ``Σ⁻``, is not refined, and boxes of
+    the boundary of ``S`` are dropped. Here the feasibility test and the bounds are one
+    branch and bound over all of ``U``, so the bracket is certified for the exact problem
+    over ``S``, and the returned ``u`` is proven to be in ``S``. Its width is limited by
+    ``eps`` and by the W-cells where ``f`` is not monotone in ``w`` (a larger ``w_depth``
+    tightens it).
+
+    Examples
+    --------
+    >>> import casadi as ca, casadi_cmpc as cm
+    >>> from casadi_cmpc.solvers.minimax import minimax
+    >>> u, w = ca.SX.sym("u"), ca.SX.sym("w")
+    >>> r = minimax(ca.Function("f", [u, w], [(u - w) ** 2]), cm.Box([-1], [1]),
+    ...             cm.Box([-0.5], [0.5]), eps=1e-3)
+    >>> bool(r.lower <= 0.25 <= r.upper and r.width < 1e-2)
+    True
+    """
+    t0 = time.perf_counter()
+    meth = str(method).lower()
+    if meth not in _METHODS:
+        raise ValueError(f"Unknown method '{method}'; valid methods: {', '.join(_METHODS)}")
+    meth = "alg5.3"
+    ub0 = _single_box(U, "U")
+    wb0 = _single_box(W, "W")
+    m, l = ub0.shape[0], wb0.shape[0]
+    f = _check_fun(f, "f", m, l, scalar=True)
+    g = None if constraints is None else _check_fun(constraints, "constraints", m, l, False)
+    opts: dict[str, Any] = {"w_depth": min(3 * l, 9), "mean_value": True}
+    options = {} if options is None else options
+    if not isinstance(options, dict):
+        raise TypeError(f"options must be a dict; got {type(options).__name__}")
+    unknown = sorted(set(options) - set(_OPTION_KEYS))
+    if unknown:
+        warnings.warn(f"minimax ignores the unknown options {unknown}; valid options: "
+                      f"{', '.join(_OPTION_KEYS)}", CmpcWarning, stacklevel=2)
+    opts.update({k: v for k, v in options.items() if k in _OPTION_KEYS})
+    opts.setdefault("w_depth_final", int(opts["w_depth"]) + 3)
+    w_depth, w_final = int(opts["w_depth"]), int(opts["w_depth_final"])
+    if w_depth < 0 or w_final < 0:
+        raise ValueError(f"options w_depth and w_depth_final must be >= 0; got {w_depth}, "
+                         f"{w_final}")
+    if not np.isfinite(eps) or eps <= 0:
+        raise ValueError(f"eps must be a positive number; got {eps}")
+
+    S = _Minimax(f, g, ub0, wb0, w_depth, w_final, bool(opts["mean_value"]))
+    fr = BoxFrontier.from_boxes(ub0[None])
+    out = branch_and_bound(fr, S.classify, eps, max_boxes=max_boxes, time_limit=time_limit,
+                           keep_outer=False, progress=progress, desc="minimax")
+    cand = out.boundary.boxes
+    with np.errstate(all="ignore"):
+        # final bounds with the finer cells
+        if S.u is not None:
+            S.certify(S.u[None], S.cells_final)
+        if cand.shape[0]:
+            lb, infeasible = S.lower_bounds(cand, S.cells_final)
+            mid = np.clip(0.5 * cand[..., 0] + 0.5 * cand[..., 1], cand[..., 0], cand[..., 1])
+            order = np.argsort(lb)[:64]
+            S.certify(mid[order], S.cells_final)
+            keep = ~infeasible & ~(lb > S.upper)
+            cand, lb = cand[keep], lb[keep]
+    upper = S.upper
+    if cand.shape[0]:
+        lower = float(lb.min())
+    else:
+        lower = upper  # nothing may hold a feasible point below upper (or nothing feasible)
+    lower = min(lower, upper)
+    status = out.status
+    if upper == np.inf and cand.shape[0] == 0:
+        status = Status.DISPROVED
+        lower = upper = np.inf
+        msg = ("proven infeasible: for every u in U some w in W gives g(u, w) > 0"
+               if g is not None else "no finite bound could be certified")
+    elif upper == np.inf:
+        if status == Status.PROVED:
+            status = Status.UNDECIDED
+        msg = (f"no feasible u certified; certified: max_w f(u, w) >= {lower:.10g} for every "
+               "feasible u")
+    elif lower == -np.inf:
+        if status == Status.PROVED:
+            status = Status.NUMERICAL
+        msg = "f is unbounded below on a candidate box (or undefined there): lower = -inf"
+    else:
+        over = " over the u with g(u, w) <= 0 for all w" if g is not None else ""
+        msg = (f"certified: {lower:.10g} <= min_u max_w f(u, w) <= {upper:.10g}{over}; the "
+               f"returned u is proven feasible and max_w f(u, w) <= {upper:.10g} at it")
+        if status == Status.BUDGET:
+            msg = f"{out.message}; {msg}"
+    w_best = None if S.u is None else S.worst_w(S.u)
+    return MinimaxResult(
+        success=status == Status.PROVED, status=status, message=msg, method=meth,
+        lower=float(lower), upper=float(upper), u=S.u, u_feasible=S.u is not None,
+        w=w_best, fun=float(upper), candidates=cand, nit=out.levels,
+        n_boxes=out.n_classified, elapsed=time.perf_counter() - t0)

@@ -1,0 +1,426 @@
+"""Quantified set inversion via modal intervals (thesis §5.1.5, Alg 5.1 and Alg 5.2).
+
+Paves the set
+
+    Σ = { x ∈ X0 : ∀ w ∈ W  ∃ u ∈ U :  f(x, u, w) ∈ Y }
+
+with one classifier plugged into the batched branch-and-bound engine
+(:func:`~casadi_cmpc.solvers.engine.branch_and_bound`). The classifier uses the inner and
+outer approximations of the semantic extension ``f*`` computed by
+:class:`~casadi_cmpc.interval.modal.SemanticExtension`, with ``x`` and ``w`` proper
+(universally quantified) and ``u`` improper (existentially quantified), and, for Alg 5.2, a
+nested bisection of ``U`` vectorised over the whole frontier.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .._validate import as_boxes
+from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
+from ..interval.modal import SemanticExtension
+from ..sets.box import Box
+from ..sets.paving import Paving
+from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
+
+__all__ = ["quantified_sivia"]
+
+_METHODS = ("auto", "alg5.1", "alg5.2")
+_DEFAULT_OPTIONS: dict[str, Any] = {
+    "u_depth": 8,
+    "max_pairs": 200_000,
+    "witnesses": True,
+    "mean_value": True,
+}
+
+
+def _check_options(options: dict[str, Any] | None, method: str) -> dict[str, Any]:
+    opts = dict(_DEFAULT_OPTIONS)
+    if options is None:
+        options = {}
+    if not isinstance(options, dict):
+        raise TypeError(f"options must be a dict; got {type(options).__name__}")
+    unknown = sorted(set(options) - set(_DEFAULT_OPTIONS))
+    if unknown:
+        warnings.warn(f"quantified_sivia ignores the unknown options {unknown}; valid options: "
+                      f"{', '.join(_DEFAULT_OPTIONS)}", CmpcWarning, stacklevel=3)
+    for k in _DEFAULT_OPTIONS:
+        if k in options:
+            opts[k] = options[k]
+    if method == "alg5.1":
+        if "u_depth" in options and int(options["u_depth"]) != 0:
+            warnings.warn("method 'alg5.1' does not bisect U; option u_depth is ignored",
+                          CmpcWarning, stacklevel=3)
+        opts["u_depth"] = 0
+        opts["witnesses"] = False
+    u_depth = int(opts["u_depth"])
+    if u_depth < 0:
+        raise ValueError(f"option u_depth must be >= 0; got {opts['u_depth']}")
+    opts["u_depth"] = u_depth
+    opts["max_pairs"] = int(opts["max_pairs"])
+    if opts["max_pairs"] < 1:
+        raise ValueError(f"option max_pairs must be >= 1; got {options.get('max_pairs')}")
+    opts["witnesses"] = bool(opts["witnesses"])
+    opts["mean_value"] = bool(opts["mean_value"])
+    return opts
+
+
+def _bounded_box(data: Any, d: int, name: str) -> np.ndarray:
+    b = as_boxes(data, d, name)
+    if b.shape[0] != 1:
+        raise DimensionError(f"{name} must be a single box; got {b.shape[0]} boxes")
+    if not np.isfinite(b).all():
+        raise UnboundedSetError(f"{name} must be bounded; got {b[0].tolist()}")
+    return b[0]
+
+
+class _QuantifiedClassifier:
+    """Classifier of x-boxes for ``∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y``.
+
+    Columns of the joint boxes: x (0..n-1), u (n..n+m-1), w (n+m..d-1).
+    """
+
+    def __init__(self, ext: SemanticExtension, n: int, m: int, l: int, U: np.ndarray,
+                 W: np.ndarray, Y: Box, opts: dict[str, Any]) -> None:
+        self.ext = ext
+        self.n, self.m, self.l = n, m, l
+        self.d = n + m + l
+        self.p = ext.p
+        self.U = U
+        self.W = W
+        self.ylo = Y.lo
+        self.yhi = Y.hi
+        self.u_depth = opts["u_depth"] if m > 0 else 0
+        self.max_pairs = opts["max_pairs"]
+        self.witnesses = opts["witnesses"]
+        self.us = slice(n, n + m)
+        self.ws = slice(n + m, self.d)
+        self.imp_u = np.zeros(self.d, dtype=bool)
+        self.imp_u[self.us] = True
+        self.imp_xu = np.zeros(self.d, dtype=bool)
+        self.imp_xu[: n + m] = True
+        self.imp_none = np.zeros(self.d, dtype=bool)
+        du = U[:, 1] - U[:, 0]
+        self.u_scale = np.where(du > 0, du, 1.0)
+        self.n_pairs = 0  # U-cells examined in total (statistics)
+
+    # ------------------------------------------------------------------ helpers
+    def _assemble(self, X: np.ndarray, Uc: np.ndarray) -> np.ndarray:
+        P = Uc.shape[0]
+        Wb = np.broadcast_to(self.W, (P, self.l, 2))
+        return np.concatenate([X, Uc, Wb], axis=1)
+
+    def _inside(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Outer approximation ``[lo, hi]`` (modal) included in Y, per output: (P, p)."""
+        return (lo >= self.ylo) & (hi <= self.yhi)
+
+    def _excluded(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Inner approximation ``[lo, hi]`` not included in Y for some output: (P,)."""
+        return ((lo < self.ylo) | (hi > self.yhi)).any(axis=-1)
+
+    def _witness_points(self, J0: np.ndarray) -> np.ndarray:
+        """Candidate points of W per x-box: (N, C, l).
+
+        For each output j, the corner of W minimising f_j and the one maximising it (by the
+        sign of the interval derivative over X x U x W; the midpoint where it is unknown).
+        """
+        Jw = J0[:, :, self.ws, :]
+        inc = Jw[..., 0] >= 0
+        dec = (Jw[..., 1] <= 0) & ~inc
+        wlo, whi = self.W[:, 0], self.W[:, 1]
+        wm = np.clip(0.5 * wlo + 0.5 * whi, wlo, whi)
+        low = np.where(inc, wlo, np.where(dec, whi, wm))
+        high = np.where(inc, whi, np.where(dec, wlo, wm))
+        return np.concatenate([low, high], axis=1)
+
+    # --------------------------------------------------------------------- classify
+    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return self._classify(fr)
+
+    def _classify(self, fr: BoxFrontier) -> np.ndarray:
+        ext = self.ext
+        X = fr.boxes
+        N = X.shape[0]
+        labels = np.zeros(N, dtype=np.int8)
+        if N == 0:
+            return labels
+        cells = np.broadcast_to(self.U, (N, self.m, 2)).copy()
+        Z = self._assemble(X, cells)
+        J = ext.jacobian_unchecked(Z)
+        # Exclusion witnesses: points of W shared by all U-cells of an x-box. With no w,
+        # the single (empty) witness makes the exclusion test of every cell global.
+        if self.l == 0:
+            C = 1
+            cands = None
+        elif self.witnesses:
+            cands = self._witness_points(J)
+            C = cands.shape[1]
+        else:
+            C = 0
+            cands = None
+        idx = np.arange(N)
+        mask = np.zeros((N, C), dtype=bool)  # cell proven excluded at witness c
+        useless = np.zeros(N, dtype=bool)  # cell cannot serve as the ∃u witness
+        frozen = np.zeros((N, C), dtype=np.int64)  # non-excluded cells no longer refined
+        proven = np.zeros(N, dtype=bool)
+        outer = np.zeros(N, dtype=bool)
+        for depth in range(self.u_depth + 1):
+            P = idx.size
+            if P == 0:
+                break
+            self.n_pairs += P
+            if depth > 0:
+                Z = self._assemble(X[idx], cells)
+                J = ext.jacobian_unchecked(Z)
+            # --- exclusion (inner approximations, x and u improper) -------------------
+            # own: w proper, its points chosen per cell (thesis Alg 5.2 step 12; Alg 5.1
+            # step 5 for the whole U); witnesses: w fixed to a point shared by all cells
+            Zs = [Z]
+            Js = [J]
+            if cands is not None:
+                for c in range(C):
+                    Zc = Z.copy()
+                    wc = cands[idx, c]
+                    Zc[:, self.ws, 0] = wc
+                    Zc[:, self.ws, 1] = wc
+                    Zs.append(Zc)
+                    Js.append(J)
+            r = ext.bounds_unchecked(np.concatenate(Zs), self.imp_xu, np.concatenate(Js),
+                                     outer=False, inner=True)
+            ex = self._excluded(r["inner_lo"], r["inner_hi"]).reshape(len(Zs), P)
+            excl_own = ex[0]
+            if self.l == 0:
+                mask[:, 0] |= excl_own
+            elif cands is not None:
+                mask |= ex[1:].T
+            if depth == 0:
+                # the cell is all of U: ∃w ∀x ∀u f ∉ Y, so no x of the box is in Σ
+                outer[idx[excl_own]] = True
+            useless |= excl_own
+            if C:
+                useless |= mask.any(axis=1)
+            # --- inclusion (outer approximations, u improper) ---------------------------
+            sel = np.flatnonzero(~useless & ~outer[idx] & ~proven[idx])
+            if sel.size:
+                ok = self._included(Z[sel], J[sel])
+                proven[idx[sel[ok]]] = True
+            # --- exclusion of whole x-boxes through a shared witness --------------------
+            if C:
+                notexcl = frozen.copy()
+                np.add.at(notexcl, idx, (~mask).astype(np.int64))
+                outer |= (notexcl == 0).any(axis=1) & ~proven
+            # --- keep the cells worth refining ------------------------------------------
+            alive = ~proven[idx] & ~outer[idx]
+            if C:
+                alive &= ~mask.all(axis=1)  # excluded at every witness: counts as excluded
+            else:
+                alive &= ~useless
+            idx, cells, mask, useless = idx[alive], cells[alive], mask[alive], useless[alive]
+            if depth == self.u_depth or idx.size == 0:
+                break
+            # --- bisect the U-cells (widest component relative to U) --------------------
+            lo, hi = cells[..., 0], cells[..., 1]
+            k = np.argmax((hi - lo) / self.u_scale, axis=1)
+            rows = np.arange(idx.size)
+            a, b = lo[rows, k], hi[rows, k]
+            cpt = np.clip(0.5 * a + 0.5 * b, a, b)
+            can = (a < cpt) & (cpt < b)
+            if 2 * int(can.sum()) > self.max_pairs:
+                can[:] = False
+            if not can.all():
+                if C:
+                    np.add.at(frozen, idx[~can], (~mask[~can]).astype(np.int64))
+                idx, cells, mask, useless = idx[can], cells[can], mask[can], useless[can]
+                rows, k, cpt = rows[: idx.size], k[can], cpt[can]
+                if idx.size == 0:
+                    break
+            left = cells.copy()
+            right = cells.copy()
+            left[rows, k, 1] = cpt
+            right[rows, k, 0] = cpt
+            idx = np.concatenate([idx, idx])
+            cells = np.concatenate([left, right])
+            mask = np.concatenate([mask, mask])
+            useless = np.concatenate([useless, useless])
+        labels[outer] = OUTER
+        labels[proven] = INNER
+        return labels
+
+    def _included(self, Z: np.ndarray, J: np.ndarray) -> np.ndarray:
+        """Cells proving ``∀x ∀w ∃u ∈ cell : f ∈ Y`` (thesis Alg 5.1 step 7, Alg 5.2 steps
+        16 and 20): output j* with u improper, the other outputs with u proper."""
+        ext, p = self.ext, self.p
+        P = Z.shape[0]
+        if p == 1:
+            r = ext.bounds_unchecked(Z, self.imp_u, J, outer=True, inner=False)
+            return self._inside(r["outer_lo"], r["outer_hi"])[:, 0]
+        imp = np.concatenate([np.broadcast_to(self.imp_u, (P, self.d)),
+                              np.broadcast_to(self.imp_none, (P, self.d))])
+        r = ext.bounds_unchecked(np.concatenate([Z, Z]), imp, np.concatenate([J, J]),
+                                 outer=True, inner=False)
+        ins = self._inside(r["outer_lo"], r["outer_hi"])
+        in_a, in_b = ins[:P], ins[P:]
+        others = in_b.sum(axis=1)[:, None] - in_b  # outputs other than j* inside (∀u)
+        return (in_a & (others == p - 1)).any(axis=1)
+
+
+def quantified_sivia(f: ca.Function, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
+                     method: str = "auto", options: dict[str, Any] | None = None,
+                     split_ratio: float = 0.5, relative: bool = False,
+                     max_boxes: int = 2_000_000, time_limit: float | None = None,
+                     keep_outer: bool = True, progress: bool | None = None) -> Paving:
+    """Quantified set inversion: pave ``{x ∈ X0 : ∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y}``.
+
+    Thesis §5.1.5, Alg 5.1 (one output) and Alg 5.2 (several outputs, nested bisection of U).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        Continuous SX Function with inputs ``(x, u, w)`` (or ``(x, u)`` when ``W`` is None) and
+        one output of ``p = Y.dim`` elements.
+    X0 : Box or array_like, shape (n, 2)
+        The initial (bounded) box of states.
+    U : Box or array_like, shape (m, 2)
+        Admissible inputs (existentially quantified, bounded).
+    W : Box or array_like, shape (l, 2), or None
+        Disturbances (universally quantified, bounded); None when ``f`` has no ``w``.
+    Y : Box
+        The target, of dimension ``p``; its bounds may be infinite.
+    eps : float
+        Undecided x-boxes whose widest component is at most ``eps`` (relative to the widths
+        of ``X0`` when ``relative=True``) are not bisected further.
+    method : {"auto", "alg5.1", "alg5.2"}
+        ``"alg5.1"``: thesis Alg 5.1, scalar ``f`` only, no bisection of ``U``.
+        ``"alg5.2"``: Alg 5.2 with the nested bisection of ``U``, any ``p``. ``"auto"``:
+        ``"alg5.2"`` (for a scalar ``f`` it contains Alg 5.1 as its first step).
+    options : dict, optional
+        ``u_depth`` (int, default 8): rounds of bisection of the U-cells per x-box (Alg 5.2);
+        ``max_pairs`` (int, default 200000): largest number of (x-box, U-cell) pairs examined
+        at once (beyond it the nested search stops: sound, less sharp);
+        ``witnesses`` (bool, default True): exclude x-boxes through points of W shared by
+        all U-cells (see Notes); ``mean_value`` (bool, default True): combine the
+        monotonicity bounds with the modal mean-value extension. Unknown keys warn.
+    split_ratio : float
+        Position of the cut when an x-box is bisected.
+    relative : bool
+        Measure widths relative to ``X0``.
+    max_boxes, time_limit : optional
+        Limits; a stopped search reports its leftovers as boundary boxes (still sound).
+    keep_outer : bool
+        Keep the excluded boxes (``paving.outer``) for drawing.
+    progress : bool or None
+        tqdm progress bar (None: only for searches longer than 2 s).
+
+    Returns
+    -------
+    Paving
+        ``inner``: boxes in which the quantified statement is proven for **every** x;
+        ``outer``: boxes in which it is proven **false** for every x (for every x there is a
+        w for which no u in U works); ``boundary``: undecided boxes. Extra attributes:
+        ``status``, ``message``, ``method``, ``elapsed``, ``levels``, ``n_classified``,
+        ``n_pairs`` (U-cells examined).
+
+    Raises
+    ------
+    DimensionError
+        Sizes of ``f``'s inputs or output disagree with ``X0``, ``U``, ``W``, ``Y``.
+    UnsupportedOperationError
+        ``f`` contains operations through which it may jump (the semantics needs continuity).
+
+    Notes
+    -----
+    Write ``f*(X, W, U*)`` for the semantic extension with x, w proper and u improper
+    (``U* = Dual U``). By the semantic theorem (5.13), ``f_j*(X, W, U*) ⊆ [a_j, b_j]`` iff
+    ``∀x ∀w ∃u ∈ U: f_j(x, u, w) ∈ [a_j, b_j]`` (for continuous ``f``).
+
+    **Inclusion (INNER).** A box is inner when, for some U-cell ``Uc`` (the whole U for Alg
+    5.1; the cells of the nested bisection for Alg 5.2) and some output ``k``,
+    ``Outer(f_k*(X, W, Uc*)) ⊆ Y_k`` (u existential) and, for every other output ``j``,
+    ``Outer(f_j*(X, W, Uc)) ⊆ Y_j`` with ``Uc`` proper (``∀u ∈ Uc``): the u found for ``k``
+    then satisfies the others too (thesis Alg 5.2 steps 16 and 20). Proven:
+    ``∀x ∈ box ∀w ∈ W ∃u ∈ Uc ⊆ U : f(x, u, w) ∈ Y``.
+
+    **Exclusion (OUTER).** With x made existential too,
+    ``Inner(f_j*(Dual X, W, Uc*)) ⊄ Y_j`` proves ``∃w ∀x ∈ box ∀u ∈ Uc : f_j ∉ Y_j``
+    (Alg 5.1 step 5, Alg 5.2 steps 5 and 12). For ``Uc = U`` this excludes the box. For a
+    smaller cell it only shows that the cell cannot provide the ``∃u`` (the w may differ
+    from cell to cell), and the cell is dropped from the inclusion search. In addition,
+    with ``witnesses`` on, a few points ``w_c`` of W are fixed per x-box (for each output,
+    the corners of W that minimise and maximise it by the sign of the interval derivative).
+    A box is excluded when, for one ``w_c``, **every** cell of a partition of U has some
+    output proven outside Y for all x of the box and u of the cell (inner approximations
+    with ``w = w_c``). This proves ``∀x ∈ box ∀u ∈ U ∃j : f_j(x, u, w_c) ∉ Y_j``, which
+    catches infeasibility that comes from the coupling of the outputs through a common u;
+    Alg 5.2 alone never excludes those boxes.
+
+    The semantics is ``∀w ∃u``: u may depend on w. A control input that must be chosen
+    before w is known (``∃u ∀w``) is a stronger requirement that this solver does not
+    certify.
+
+    Examples
+    --------
+    >>> import casadi as ca, numpy as np, casadi_cmpc as cm
+    >>> from casadi_cmpc.solvers.quantified import quantified_sivia
+    >>> x, u, w = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("w")
+    >>> f = ca.Function("f", [x, u, w], [x + u + w])
+    >>> P = quantified_sivia(f, cm.Box([-4], [4]), cm.Box([-1], [1]), cm.Box([-0.5], [0.5]),
+    ...                      cm.Box([-1], [1]), eps=0.01)
+    >>> bool(P.inner[:, 0, 0].min() >= -1.5 and P.inner[:, 0, 1].max() <= 1.5)  # Σ = [-1.5, 1.5]
+    True
+    """
+    meth = str(method).lower()
+    if meth not in _METHODS:
+        raise ValueError(f"Unknown method '{method}'; valid methods: {', '.join(_METHODS)}")
+    if not isinstance(f, ca.Function):
+        raise TypeError(f"f must be a casadi.Function; got {type(f).__name__}")
+    n_in = 2 if W is None else 3
+    if f.n_in() != n_in:
+        raise DimensionError(
+            f"f must take {'(x, u)' if W is None else '(x, u, w)'} ({n_in} inputs) "
+            f"{'since W is None' if W is None else ''}; '{f.name()}' has {f.n_in()} inputs")
+    if f.n_out() != 1:
+        raise DimensionError(f"f must have one output; '{f.name()}' has {f.n_out()} "
+                             "(stack them with casadi.vertcat)")
+    if not isinstance(Y, Box):
+        raise TypeError(f"Y must be a Box; got {type(Y).__name__}")
+    n = f.numel_in(0)
+    m = f.numel_in(1)
+    l = 0 if W is None else f.numel_in(2)
+    x0 = _bounded_box(X0, n, "X0")
+    ub = _bounded_box(U, m, "U")
+    wb = np.zeros((0, 2)) if W is None else _bounded_box(W, l, "W")
+    p = f.numel_out(0)
+    if Y.dim != p:
+        raise DimensionError(f"target Y has dimension {Y.dim}; f has {p} outputs")
+    if meth == "auto":
+        meth = "alg5.2"
+    if meth == "alg5.1" and p != 1:
+        raise ValueError(f"method 'alg5.1' is the 1-dimensional algorithm; f has {p} "
+                         "outputs (use 'alg5.2')")
+    opts = _check_options(options, meth)
+    if not np.isfinite(eps) or eps <= 0:
+        raise ValueError(f"eps must be a positive number; got {eps}")
+    ext = SemanticExtension(f, mean_value=opts["mean_value"])
+    classify = _QuantifiedClassifier(ext, n, m, l, ub, wb, Y, opts)
+    domain = Box(x0[:, 0], x0[:, 1])
+    scale = None
+    if relative:
+        scale = np.where(domain.diam > 0, domain.diam, 1.0)
+    fr = BoxFrontier.from_boxes(x0[None], scale=scale, split_ratio=split_ratio)
+    out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
+                           keep_outer=keep_outer, progress=progress, desc="quantified sivia")
+    paving = Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
+                    outer=out.outer.boxes, domain=domain, n_discarded=out.n_discarded)
+    paving.status = out.status
+    paving.message = out.message
+    paving.method = meth
+    paving.elapsed = out.elapsed
+    paving.levels = out.levels
+    paving.n_classified = out.n_classified
+    paving.n_pairs = classify.n_pairs
+    return paving
