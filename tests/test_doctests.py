@@ -17,6 +17,7 @@ MODULES = [
     "casadi_cmpc.solvers.minimize",
     "casadi_cmpc.solvers.quantified",
     "casadi_cmpc.solvers.minimax",
+    "casadi_cmpc.solvers.result",
     "casadi_cmpc.interval.modal",
 ]
 

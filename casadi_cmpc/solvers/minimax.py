@@ -21,10 +21,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .._validate import as_boxes
-from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
+from ..exceptions import CmpcWarning, DimensionError
 from ..interval.modal import SemanticExtension, _partition
+from ._common import one_output_function, positive_eps, single_box, thin
 from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
+from .result import _BracketResult, _format_point
 
 __all__ = ["minimax", "MinimaxResult"]
 
@@ -33,14 +34,16 @@ _OPTION_KEYS = ("w_depth", "w_depth_final", "mean_value")
 _VERTEX_MAX = 16  # vertices of W used as extra points of the lower bound when 2**l <= this
 
 
-@dataclass(frozen=True, eq=False)
-class MinimaxResult:
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class MinimaxResult(_BracketResult):
     """Result of :func:`minimax`: a certified bracket ``lower <= V* <= upper``.
+
+    Fields shared by all solvers (``success``, ``message``, ``elapsed`` in s, ``nit``: levels,
+    ``n_boxes``: u-boxes classified) are those of the frozen, keyword-only base
+    :class:`~casadi_cmpc.solvers.result.Result`.
 
     Attributes
     ----------
-    success : bool
-        ``status == Status.PROVED``.
     status : Status
         ``PROVED``: the search ran to completion and both bounds are finite.
         ``BUDGET``: a limit or an interruption stopped the search; the bracket is still
@@ -50,8 +53,6 @@ class MinimaxResult:
         ``UNDECIDED``: no feasible u could be certified (``upper = inf``).
         ``NUMERICAL``: the enclosure of ``f`` is unbounded below on a candidate box
         (``lower = -inf``).
-    message : str
-        What was proven, in words.
     method : str
         ``"alg5.3"``.
     lower : float
@@ -66,52 +67,22 @@ class MinimaxResult:
         True when ``u`` is proven to satisfy ``g(u, w) <= 0`` for every ``w ∈ W``.
     w : ndarray, shape (l,), or None
         A worst-case disturbance for ``u`` found by sampling (a guess, not certified).
-    fun : float
-        Same as ``upper``.
+    fun, width : float
+        Read-only: ``upper`` and ``upper - lower``.
     candidates : ndarray, shape (N, m, 2)
         u-boxes that may contain minimax solutions: every solution lies in their union.
-    nit : int
-        Branch-and-bound levels.
-    n_boxes : int
-        u-boxes classified.
-    elapsed : float
-        Wall-clock time in seconds.
     """
 
-    success: bool
-    status: Status
-    message: str
-    method: str
-    lower: float
-    upper: float
     u: np.ndarray | None
     u_feasible: bool
     w: np.ndarray | None
-    fun: float
-    candidates: np.ndarray
-    nit: int
-    n_boxes: int
-    elapsed: float
 
-    @property
-    def width(self) -> float:
-        """Width ``upper - lower`` of the certified bracket."""
-        return float(self.upper - self.lower)
-
-    def __repr__(self) -> str:
-        u = None if self.u is None else np.array2string(self.u, precision=6)
-        return (f"MinimaxResult(status={self.status.name}, lower={self.lower:.10g}, "
-                f"upper={self.upper:.10g}, u={u}, candidates={self.candidates.shape[0]}, "
-                f"nit={self.nit}, n_boxes={self.n_boxes}, elapsed={self.elapsed:.3g})")
+    def _repr_solution(self) -> list[str]:
+        return [f"u={_format_point(self.u)}"]
 
 
 def _check_fun(fun: Any, name: str, m: int, l: int, scalar: bool) -> ca.Function:
-    if not isinstance(fun, ca.Function):
-        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
-    if fun.n_in() != 2 or fun.n_out() != 1:
-        raise DimensionError(
-            f"{name} must take (u, w) and have one output; '{fun.name()}' has {fun.n_in()} "
-            f"inputs and {fun.n_out()} outputs")
+    fun = one_output_function(fun, name, ("u", "w"))
     if fun.numel_in(0) != m or fun.numel_in(1) != l:
         raise DimensionError(
             f"{name} takes inputs of {fun.numel_in(0)} and {fun.numel_in(1)} elements but U "
@@ -120,19 +91,6 @@ def _check_fun(fun: Any, name: str, m: int, l: int, scalar: bool) -> ca.Function
         raise DimensionError(f"{name} must be scalar; '{fun.name()}' has "
                              f"{fun.numel_out(0)} outputs")
     return fun
-
-
-def _single_box(data: Any, name: str) -> np.ndarray:
-    b = as_boxes(data, None, name)
-    if b.shape[0] != 1:
-        raise DimensionError(f"{name} must be a single box; got {b.shape[0]} boxes")
-    if not np.isfinite(b).all():
-        raise UnboundedSetError(f"{name} must be bounded; got {b[0].tolist()}")
-    return b[0]
-
-
-def _thin(points: np.ndarray) -> np.ndarray:
-    return np.stack([points, points], axis=-1)
 
 
 class _Minimax:
@@ -152,7 +110,7 @@ class _Minimax:
         if 2 ** self.l <= _VERTEX_MAX:
             bits = np.array(np.meshgrid(*[[0, 1]] * self.l, indexing="ij")).reshape(self.l, -1).T
             pts.extend(np.where(bits == 1, W[:, 1], W[:, 0]))
-        self.points = _thin(np.array(pts))  # thin cells: extra points for the lower bound
+        self.points = thin(np.array(pts))  # thin cells: extra points for the lower bound
         self.upper = np.inf
         self.u: np.ndarray | None = None
 
@@ -185,7 +143,7 @@ class _Minimax:
     def point_bounds(self, pts: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(ub of max_w f(u, w), proven feasible) at points u (N, m); cells cover W."""
         N, K = pts.shape[0], cells.shape[0]
-        Z = self._pairs(_thin(pts), cells)
+        Z = self._pairs(thin(pts), cells)
         r = self.fext.bounds_unchecked(Z, self.imp_w, outer=False, inner=True)
         # inner lower bound of f*(u, Dual W_k) is >= max_{w ∈ W_k} f(u, w)
         ub = r["inner_lo"][:, 0].reshape(N, K).max(axis=1)
@@ -226,7 +184,7 @@ class _Minimax:
         k = min(k, 65)
         axes = [np.linspace(lo, hi, k) for lo, hi in self.W]
         grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(self.l, -1).T
-        Z = np.concatenate([np.repeat(_thin(u[None]), grid.shape[0], axis=0), _thin(grid)],
+        Z = np.concatenate([np.repeat(thin(u[None]), grid.shape[0], axis=0), thin(grid)],
                            axis=1)
         vals = self.fext.evaluate_unchecked(Z)[:, 0]
         mid = 0.5 * vals[:, 0] + 0.5 * vals[:, 1]
@@ -317,8 +275,8 @@ def minimax(f: ca.Function, U: Any, W: Any, eps: float,
     if meth not in _METHODS:
         raise ValueError(f"Unknown method '{method}'; valid methods: {', '.join(_METHODS)}")
     meth = "alg5.3"
-    ub0 = _single_box(U, "U")
-    wb0 = _single_box(W, "W")
+    ub0 = single_box(U, "U")
+    wb0 = single_box(W, "W")
     m, l = ub0.shape[0], wb0.shape[0]
     f = _check_fun(f, "f", m, l, scalar=True)
     g = None if constraints is None else _check_fun(constraints, "constraints", m, l, False)
@@ -336,8 +294,7 @@ def minimax(f: ca.Function, U: Any, W: Any, eps: float,
     if w_depth < 0 or w_final < 0:
         raise ValueError(f"options w_depth and w_depth_final must be >= 0; got {w_depth}, "
                          f"{w_final}")
-    if not np.isfinite(eps) or eps <= 0:
-        raise ValueError(f"eps must be a positive number; got {eps}")
+    eps = positive_eps(eps)
 
     S = _Minimax(f, g, ub0, wb0, w_depth, w_final, bool(opts["mean_value"]))
     fr = BoxFrontier.from_boxes(ub0[None])
@@ -384,7 +341,6 @@ def minimax(f: ca.Function, U: Any, W: Any, eps: float,
             msg = f"{out.message}; {msg}"
     w_best = None if S.u is None else S.worst_w(S.u)
     return MinimaxResult(
-        success=status == Status.PROVED, status=status, message=msg, method=meth,
-        lower=float(lower), upper=float(upper), u=S.u, u_feasible=S.u is not None,
-        w=w_best, fun=float(upper), candidates=cand, nit=out.levels,
+        status=status, message=msg, method=meth, lower=float(lower), upper=float(upper),
+        u=S.u, u_feasible=S.u is not None, w=w_best, candidates=cand, nit=out.levels,
         n_boxes=out.n_classified, elapsed=time.perf_counter() - t0)

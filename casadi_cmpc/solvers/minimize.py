@@ -16,10 +16,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .._validate import as_boxes
-from ..exceptions import DimensionError, UnboundedSetError
+from ..exceptions import DimensionError
 from ..interval.compiler import InclusionFunction
+from ._common import one_output_function, positive_eps, single_box, thin
 from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
+from .result import _BracketResult, _format_point
 
 __all__ = ["minimize", "MinimizeResult"]
 
@@ -44,14 +45,16 @@ _VERTEX_BOXES = 4
 _VERTEX_MAX = 64
 
 
-@dataclass(frozen=True, eq=False)
-class MinimizeResult:
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class MinimizeResult(_BracketResult):
     """Result of :func:`minimize`: a certified bracket ``lower <= min f <= upper``.
+
+    A frozen :class:`~casadi_cmpc.solvers.result.Result` (keyword-only fields): ``success``,
+    ``message``, ``nit`` (branch-and-bound levels), ``n_boxes`` (boxes classified) and
+    ``elapsed`` (s) are described there. ``fun`` and ``width`` are read-only properties.
 
     Attributes
     ----------
-    success : bool
-        ``status == Status.PROVED``.
     status : Status
         ``PROVED``: the search ran to completion and both bounds are finite.
         ``BUDGET``: ``max_boxes``, ``time_limit`` or an interruption stopped the search; the
@@ -62,8 +65,6 @@ class MinimizeResult:
         (``upper = inf``), e.g. constraints whose feasible set has an empty interior.
         ``NUMERICAL``: the enclosure of ``f`` is unbounded below on a candidate box (``f``
         undefined or unbounded there), so ``lower = -inf``.
-    message : str
-        What was proven, in words.
     method : str
         ``"<kind>"`` or ``"<kind>+ipopt"``: the inclusion form and the local solver used.
     lower : float
@@ -78,64 +79,31 @@ class MinimizeResult:
         True when ``x`` is proven to lie in ``X0`` and to satisfy every constraint.
     fun : float
         Same as ``upper`` (scipy's name for the optimal value).
+    width : float
+        Width ``upper - lower`` of the bracket.
     candidates : ndarray, shape (N, n, 2)
         Boxes that may contain global minimisers: every global minimiser lies in their
         union. Boxes whose lower bound exceeds the final ``upper`` are removed.
-    nit : int
-        Branch-and-bound levels.
-    n_boxes : int
-        Boxes classified.
     n_local : int
         Local (IPOPT) solves made (a solve whose tightened problem fails is repeated once
         with the original constraints; both count).
-    elapsed : float
-        Wall-clock time in seconds.
     """
 
-    success: bool
-    status: Status
-    message: str
-    method: str
-    lower: float
-    upper: float
     x: np.ndarray | None
     x_feasible: bool
-    fun: float
-    candidates: np.ndarray
-    nit: int
-    n_boxes: int
     n_local: int
-    elapsed: float
 
-    @property
-    def width(self) -> float:
-        """Width ``upper - lower`` of the certified bracket."""
-        return float(self.upper - self.lower)
-
-    def __repr__(self) -> str:
-        x = None if self.x is None else np.array2string(self.x, precision=6)
-        return (f"MinimizeResult(status={self.status.name}, lower={self.lower:.10g}, "
-                f"upper={self.upper:.10g}, x={x}, x_feasible={self.x_feasible}, "
-                f"candidates={self.candidates.shape[0]}, nit={self.nit}, "
-                f"n_boxes={self.n_boxes}, elapsed={self.elapsed:.3g})")
+    def _repr_solution(self) -> list[str]:
+        return [f"x={_format_point(self.x)}", f"x_feasible={self.x_feasible}"]
 
 
 # --------------------------------------------------------------------------- validation
 def _check_function(fun: Any, name: str, n: int | None) -> ca.Function:
-    if not isinstance(fun, ca.Function):
-        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
-    if fun.n_in() != 1 or fun.n_out() != 1:
-        raise DimensionError(
-            f"{name} must have one input and one output; '{fun.name()}' has {fun.n_in()} "
-            f"inputs and {fun.n_out()} outputs (use casadi.vertcat to stack them)")
+    fun = one_output_function(fun, name, ("x",))
     if n is not None and fun.numel_in(0) != n:
         raise DimensionError(
             f"{name} takes an input of {fun.numel_in(0)} elements but X0 has dimension {n}")
     return fun
-
-
-def _thin(points: np.ndarray) -> np.ndarray:
-    return np.stack([points, points], axis=-1)
 
 
 class _Search:
@@ -167,12 +135,12 @@ class _Search:
         if pts.shape[0] == 0:
             return
         pts = np.clip(pts, self.lo0, self.hi0)
-        thin = _thin(pts)
+        pts_thin = thin(pts)
         m = pts.shape[0]
-        fu = self.F_point.evaluate_unchecked([thin], m)[0][:, 0, 1]
+        fu = self.F_point.evaluate_unchecked([pts_thin], m)[0][:, 0, 1]
         ok = np.isfinite(fu)
         if self.G_point is not None:
-            gu = self.G_point.evaluate_unchecked([thin], m)[0][..., 1]
+            gu = self.G_point.evaluate_unchecked([pts_thin], m)[0][..., 1]
             ok &= (gu <= 0).all(axis=1)
         if not ok.any():
             return
@@ -199,7 +167,7 @@ class _Search:
         if live.any():
             lo, hi = fr.lo[live], fr.hi[live]
             mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-            fmid = self.F_point.evaluate_unchecked([_thin(mid)], mid.shape[0])[0][:, 0, 1]
+            fmid = self.F_point.evaluate_unchecked([thin(mid)], mid.shape[0])[0][:, 0, 1]
             self.certify_points(mid)
             order = np.argsort(np.where(np.isfinite(fmid), fmid, np.inf), kind="stable")
             best = order[:_VERTEX_BOXES]
@@ -387,19 +355,8 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
     n = f.numel_in(0)
     if n == 0:
         raise DimensionError(f"f must take at least one variable; '{f.name()}' takes none")
-    x0 = as_boxes(X0, n, "X0")
-    if x0.shape[0] != 1:
-        raise DimensionError(f"X0 must be a single box; got {x0.shape[0]} boxes")
-    x0 = x0[0]
-    if not np.isfinite(x0).all():
-        raise UnboundedSetError(
-            f"X0 must be bounded; got bounds {x0.tolist()} (intersect it with a finite box)")
-    try:
-        eps = float(eps)
-    except (TypeError, ValueError):
-        raise ValueError(f"eps must be a positive number; got {eps!r}") from None
-    if not np.isfinite(eps) or eps <= 0:
-        raise ValueError(f"eps must be a positive number; got {eps}")
+    x0 = single_box(X0, "X0", n)
+    eps = positive_eps(eps)
     kind_l = str(kind).lower()
     if kind_l not in _KINDS:
         raise ValueError(f"unknown kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
@@ -477,8 +434,7 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
         message = (f"global minimum certified in {bracket} (width {upper - lower:.3g}); "
                    f"{ncand} candidate boxes")
     return MinimizeResult(
-        success=status == Status.PROVED, status=status, message=message, method=method,
-        lower=float(lower), upper=float(upper), x=None if x is None else np.array(x),
-        x_feasible=bool(x_feasible and x is not None), fun=float(upper), candidates=boxes,
-        nit=out.levels, n_boxes=out.n_classified, n_local=search.n_local,
-        elapsed=time.perf_counter() - t0)
+        status=status, message=message, method=method, lower=float(lower),
+        upper=float(upper), x=None if x is None else np.array(x),
+        x_feasible=bool(x_feasible and x is not None), candidates=boxes, nit=out.levels,
+        n_boxes=out.n_classified, n_local=search.n_local, elapsed=time.perf_counter() - t0)

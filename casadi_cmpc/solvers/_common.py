@@ -1,0 +1,62 @@
+"""Private argument checks and array helpers shared by the branch-and-bound solvers."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .._validate import as_boxes
+from ..exceptions import DimensionError, UnboundedSetError
+
+__all__: list[str] = []
+
+
+def one_output_function(fun: Any, name: str, inputs: tuple[str, ...]) -> ca.Function:
+    """Return ``fun`` after checking it is a casadi.Function of ``inputs`` with one output.
+
+    Raises TypeError when ``fun`` is not a casadi.Function and :class:`DimensionError` when
+    it has another number of inputs than ``len(inputs)`` or more than one output.
+    """
+    if not isinstance(fun, ca.Function):
+        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
+    if fun.n_in() != len(inputs) or fun.n_out() != 1:
+        takes = "one input" if len(inputs) == 1 else f"({', '.join(inputs)})"
+        raise DimensionError(
+            f"{name} must take {takes} and return one output; '{fun.name()}' has "
+            f"{fun.n_in()} inputs and {fun.n_out()} outputs (use casadi.vertcat to stack "
+            "them)")
+    return fun
+
+
+def single_box(data: Any, name: str, d: int | None = None) -> np.ndarray:
+    """Return one bounded box of shape ``(d, 2)`` from ``data`` (a Box or array).
+
+    Raises :class:`DimensionError` when ``data`` holds several boxes or a box of another
+    dimension than ``d``, and :class:`UnboundedSetError` on an infinite bound.
+    """
+    b = as_boxes(data, d, name)
+    if b.shape[0] != 1:
+        raise DimensionError(f"{name} must be a single box; got {b.shape[0]} boxes")
+    if not np.isfinite(b).all():
+        raise UnboundedSetError(
+            f"{name} must be bounded; got bounds {b[0].tolist()} (intersect it with a "
+            "finite box)")
+    return b[0]
+
+
+def positive_eps(eps: Any) -> float:
+    """Return ``eps`` as a float, raising ValueError unless it is finite and positive."""
+    try:
+        value = float(eps)
+    except (TypeError, ValueError):
+        raise ValueError(f"eps must be a positive number; got {eps!r}") from None
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"eps must be a positive number; got {eps}")
+    return value
+
+
+def thin(points: np.ndarray) -> np.ndarray:
+    """Degenerate boxes ``[p, p]``, shape ``(..., d, 2)``, of points of shape ``(..., d)``."""
+    return np.stack([points, points], axis=-1)

@@ -1,0 +1,188 @@
+"""The base class of the results returned by the solvers.
+
+Every solver returns a frozen dataclass built on :class:`Result`, which holds what all of
+them report: the outcome code ``status`` (a :class:`~casadi_cmpc.solvers.engine.Status`),
+``success == (status == PROVED)``, a ``message`` in words, the ``method`` used, and the
+effort spent (``nit``, ``n_boxes``, ``elapsed``). Subclasses add the solver's answer.
+"""
+
+from __future__ import annotations
+
+import operator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import DimensionError
+from .engine import Status
+
+__all__ = ["Result"]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Result:
+    """Outcome of a solver: status code, message and effort spent.
+
+    All fields are keyword-only. The instance is frozen: assigning a field raises
+    :class:`dataclasses.FrozenInstanceError`.
+
+    Attributes
+    ----------
+    success : bool
+        ``status == Status.PROVED``. Derived from ``status`` when omitted; a value that
+        disagrees with ``status`` is refused.
+    status : Status
+        Outcome code (an :class:`~enum.IntEnum`; an int 0 to 4 is converted):
+        ``PROVED`` (0) the solver's claim is proven; ``BUDGET`` (1) a limit
+        (``max_boxes``, ``time_limit``) or an interruption stopped the search;
+        ``DISPROVED`` (2) the claim is proven false; ``UNDECIDED`` (3) the search completed
+        without deciding; ``NUMERICAL`` (4) an enclosure was unbounded or undefined. What
+        each code proves for a given solver is stated by its subclass.
+    message : str
+        What was proven, in words.
+    method : str
+        The algorithm (and variant) that produced the result.
+    nit : int
+        Iterations (branch-and-bound levels), at least 0.
+    n_boxes : int
+        Boxes classified, at least 0.
+    elapsed : float
+        Wall-clock time in s, at least 0.
+
+    Raises
+    ------
+    ValueError
+        ``status`` is not a valid code, ``success`` disagrees with ``status``, ``nit`` or
+        ``n_boxes`` is negative, or ``elapsed`` is negative or not finite.
+    TypeError
+        ``message`` or ``method`` is not a str, or ``nit`` or ``n_boxes`` is not an integer.
+
+    Notes
+    -----
+    A subclass is declared with ``@dataclass(frozen=True, eq=False, kw_only=True,
+    repr=False)`` (``repr=False`` keeps the shared ``__repr__``), chains
+    ``__post_init__`` to ``super().__post_init__()``, and lists its own numbers in the
+    repr by overriding ``_repr_parts``.
+
+    Examples
+    --------
+    >>> from casadi_cmpc.solvers.engine import Status
+    >>> from casadi_cmpc.solvers.result import Result
+    >>> r = Result(status=Status.BUDGET, message="max_boxes reached", method="demo",
+    ...            nit=3, n_boxes=12, elapsed=0.25)
+    >>> r.success, r.status.name
+    (False, 'BUDGET')
+    >>> r
+    Result(status=BUDGET, nit=3, n_boxes=12, elapsed=0.25)
+    >>> Result(status=0, success=False, message="", method="demo", nit=0, n_boxes=0,
+    ...        elapsed=0.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: success=False disagrees with status=PROVED (success must equal status == PROVED)
+    """
+
+    success: bool | None = None
+    status: Status
+    message: str
+    method: str
+    nit: int
+    n_boxes: int
+    elapsed: float
+
+    def __post_init__(self) -> None:
+        try:
+            status = Status(self.status)
+        except ValueError:
+            codes = ", ".join(f"{s.value} {s.name}" for s in Status)
+            raise ValueError(f"status must be one of {codes}; got {self.status!r}") from None
+        proved = status == Status.PROVED
+        if self.success is not None and bool(self.success) != proved:
+            raise ValueError(f"success={self.success} disagrees with status={status.name} "
+                             "(success must equal status == PROVED)")
+        for name in ("message", "method"):
+            if not isinstance(getattr(self, name), str):
+                raise TypeError(f"{name} must be a str; got "
+                                f"{type(getattr(self, name)).__name__}")
+        counts = {}
+        for name in ("nit", "n_boxes"):
+            try:
+                counts[name] = operator.index(getattr(self, name))
+            except TypeError:
+                raise TypeError(f"{name} must be an integer; got "
+                                f"{getattr(self, name)!r}") from None
+            if counts[name] < 0:
+                raise ValueError(f"{name} must be >= 0; got {counts[name]}")
+        elapsed = float(self.elapsed)
+        if not (np.isfinite(elapsed) and elapsed >= 0):
+            raise ValueError(f"elapsed must be a finite number of seconds >= 0; got {elapsed}")
+        self._set(status=status, success=proved, elapsed=elapsed, **counts)
+
+    def _set(self, **values: Any) -> None:
+        """Store normalised field values (in ``__post_init__`` of a frozen instance)."""
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+
+    def _repr_parts(self) -> list[str]:
+        """``name=value`` items a subclass shows between ``status`` and ``nit``."""
+        return []
+
+    def __repr__(self) -> str:
+        parts = [f"status={self.status.name}", *self._repr_parts(), f"nit={self.nit}",
+                 f"n_boxes={self.n_boxes}", f"elapsed={self.elapsed:.3g}"]
+        return f"{type(self).__name__}({', '.join(parts)})"
+
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class _BracketResult(Result):
+    """A :class:`Result` with a certified bracket ``lower <= value <= upper``.
+
+    Attributes
+    ----------
+    lower, upper : float
+        Certified bounds of the optimal value (``lower <= upper``; either may be infinite).
+    candidates : ndarray, shape (N, n, 2)
+        Boxes that may hold optimal points: every optimal point lies in their union.
+    fun : float
+        Same as ``upper`` (scipy's name for the optimal value).
+    width : float
+        ``upper - lower``.
+    """
+
+    lower: float
+    upper: float
+    candidates: np.ndarray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        lower, upper = float(self.lower), float(self.upper)
+        if lower > upper:
+            raise ValueError(f"the bracket is inverted: lower {lower:.17g} > upper {upper:.17g}")
+        cand = np.asarray(self.candidates, dtype=float)
+        if cand.ndim != 3 or cand.shape[-1] != 2:
+            raise DimensionError(
+                f"candidates must be boxes of shape (N, n, 2); got shape {cand.shape}")
+        self._set(lower=lower, upper=upper, candidates=cand)
+
+    @property
+    def fun(self) -> float:
+        """Same as ``upper`` (scipy's name for the optimal value)."""
+        return self.upper
+
+    @property
+    def width(self) -> float:
+        """Width ``upper - lower`` of the certified bracket."""
+        return float(self.upper - self.lower)
+
+    def _repr_solution(self) -> list[str]:
+        """``name=value`` items of the returned point, shown after the bracket."""
+        return []
+
+    def _repr_parts(self) -> list[str]:
+        return [f"lower={self.lower:.10g}", f"upper={self.upper:.10g}", *self._repr_solution(),
+                f"candidates={self.candidates.shape[0]}"]
+
+
+def _format_point(p: np.ndarray | None) -> str:
+    """A point for a repr: ``None`` or its entries to 6 digits."""
+    return "None" if p is None else np.array2string(np.asarray(p), precision=6)
