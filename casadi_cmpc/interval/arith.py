@@ -245,12 +245,32 @@ def mulci(al, ah, cl, ch):
     return mul(al, ah, cl, ch)
 
 
+C_DN = 1.0 - 2.0 ** -51  # x * C_DN rounded is below x - ulp(x) for normal x >= 0
+C_UP = 1.0 + 2.0 ** -51
+MAX_FLOAT = float(np.finfo(float).max)
+
+
 def sq(al, ah):
-    mig = _max(_max(al, -ah), 0.0)  # distance of the interval from 0 (NaN propagates)
+    """x**2. Both products are of non-negative numbers, so their rounding needs no ``abs``:
+    ``fl(fl(p) * (1 - 2**-51)) - 2**-1074`` is below the exact ``p`` (the relative step covers
+    one rounding of a normal result, the absolute one underflow), and the lower bound is
+    capped at the largest float (an overflowed square is only known to be huge)."""
+    mig = _max(al, -ah)  # distance of the interval from 0 (NaN propagates)
     mag = _max(-al, ah)
-    lo = _dnm_(mig * mig)
-    lo = _max(lo, 0.0, out=lo) if isinstance(lo, np.ndarray) else _max(lo, 0.0)
-    return lo, _upm_(mag * mag)
+    if isinstance(mig, np.ndarray):
+        _max(mig, 0.0, out=mig)
+        lo = mig * mig
+        lo *= C_DN
+        lo -= TINY
+        _max(lo, 0.0, out=lo)
+        _min(lo, MAX_FLOAT, out=lo)
+        hi = mag * mag
+        hi *= C_UP
+        hi += TINY
+        return lo, hi
+    mig = _max(mig, 0.0)
+    lo = _min(_max(mig * mig * C_DN - TINY, 0.0), MAX_FLOAT)
+    return lo, mag * mag * C_UP + TINY
 
 
 def div(al, ah, bl, bh):

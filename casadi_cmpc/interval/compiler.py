@@ -338,6 +338,57 @@ class InclusionFunction:
     def _natural(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         return self._pack(self._raw(self._eval, boxes, [len(p) for p in self._out_pos]), n)
 
+    def component_evaluator(self, j: int) -> Callable[[np.ndarray, np.ndarray], Any] | None:
+        """Natural enclosure of one element of the (single) output, for solvers.
+
+        Returns ``ev(lo, hi) -> (lower, upper)`` where ``lo``, ``hi`` have shape (N, n) (the
+        boxes of the single input) and the bounds have shape (N,) (or are scalars when the
+        element is constant); NaN bounds mean "no information". Only the instructions that
+        element depends on are evaluated. ``None`` when this is not available (several
+        inputs or outputs, a centered form, a restricted function); a structural zero gives
+        ``(0.0, 0.0)``. Cached per element. ``ev.unchecked`` is the same without its own
+        ``np.errstate`` (for callers that set it once around many calls).
+        """
+        if (self.n_in != 1 or self.n_out != 1 or self._keep is not None or self._widen
+                or (self.kind != "natural" and not self.centered_fallback)):
+            return None
+        cache = self.__dict__.setdefault("_components", {})
+        if j in cache:
+            return cache[j]
+        if not 0 <= j < self.size_out[0]:
+            raise IndexError(f"output element {j} out of range ({self.size_out[0]} elements)")
+        nz = np.flatnonzero(self._out_pos[0] == j)
+        if nz.size == 0:
+            def zero(lo: np.ndarray, hi: np.ndarray) -> tuple[float, float]:
+                return 0.0, 0.0
+            zero.unchecked = zero  # type: ignore[attr-defined]
+            cache[j] = zero
+            return zero
+        k = int(nz[0])
+        f = self.fun
+        syms = f.sx_in()
+        g = ca.Function(f.name(), syms, f.call(syms), {"live_variables": False})
+        gen = _Codegen(g)
+        gen.only = _needed_instructions(g, [0], nonzeros={k})
+        src = gen.build()
+        namespace: dict[str, Any] = {"_A": arith, "_K": gen.const_table, "np": np}
+        exec(compile(src, f"<interval:{f.name()}[{j}]>", "exec"), namespace)  # noqa: S102
+        raw = namespace["_eval"]
+        size = g.nnz_out(0)
+
+        def unchecked(lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
+            o: list[list[Any]] = [[None] * size]
+            raw([lo.T], [hi.T], o)
+            return o[0][k]
+
+        def ev(lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
+            with np.errstate(all="ignore"):
+                return unchecked(lo, hi)
+
+        ev.unchecked = unchecked  # type: ignore[attr-defined]  # caller sets np.errstate
+        cache[j] = ev
+        return ev
+
     # --------------------------------------------------------------- centered
     def _build_centered(self) -> None:
         """One SX Function G(z_mid..., z_box...) -> [f(z_mid)..., J(z_box), f(z_box)...].
@@ -515,15 +566,18 @@ def _restrict(fun: ca.Function, derived: Sequence[int],
     return _Restricted(g, keep)
 
 
-def _needed_instructions(g: ca.Function, outputs: Sequence[int]) -> set[int]:
-    """Instructions of ``g`` (one slot per node) that the given outputs depend on."""
+def _needed_instructions(g: ca.Function, outputs: Sequence[int],
+                         nonzeros: set[int] | None = None) -> set[int]:
+    """Instructions of ``g`` (one slot per node) that the given outputs depend on (only their
+    nonzeros in ``nonzeros`` when given)."""
     needed_slots: set[int] = set()
     keep: set[int] = set()
     outs = set(outputs)
     for k in range(g.n_instructions() - 1, -1, -1):
         op = g.instruction_id(k)
         if op == ca.OP_OUTPUT:
-            if g.instruction_output(k)[0] in outs:
+            o = g.instruction_output(k)
+            if o[0] in outs and (nonzeros is None or o[1] in nonzeros):
                 keep.add(k)
                 needed_slots.add(g.instruction_input(k)[0])
             continue

@@ -660,6 +660,21 @@ class Paving(SetBase):
         self.n_discarded = int(n_discarded)
         self._cache: dict[str, Any] = {}
 
+    @classmethod
+    def _from_solver(cls, inner: np.ndarray, boundary: np.ndarray, outer: np.ndarray,
+                     domain: Box, n_discarded: int) -> Paving:
+        """A paving from boxes a solver produced by bisecting ``domain``: float arrays of
+        shape (N, n, 2) with lo <= hi, each box inside the domain, so no checks are made."""
+        self = cls.__new__(cls)
+        for arr in (inner, boundary, outer):
+            arr.setflags(write=False)
+        self._n = domain.dim
+        self.inner, self.boundary, self.outer = inner, boundary, outer
+        self.domain = domain
+        self.n_discarded = int(n_discarded)
+        self._cache = {}
+        return self
+
     # ---------------------------------------------------------------- views
     @property
     def boxes(self) -> np.ndarray:

@@ -91,12 +91,18 @@ class BoxFrontier:
 
     ``bisect`` splits every box at ``split_ratio`` of its widest component (ties: lowest
     index; widths relative to ``scale`` when given), thesis eqs. (4.2)-(4.4).
+
+    ``data`` holds optional per-box arrays (first axis N) that travel with the boxes: ``take``
+    selects their rows, ``concat`` joins them and both halves of a bisected box inherit the
+    row of their parent. A classifier may record there what it proved about a box (e.g. which
+    constraints hold on all of it), which then holds on every descendant as well.
     """
 
     lo: np.ndarray
     hi: np.ndarray
     scale: np.ndarray | None = None
     split_ratio: float = 0.5
+    data: dict[str, np.ndarray] | None = None
     # widest component of each box, kept from width() for split() (same boxes, same order)
     _split_dim: np.ndarray | None = field(default=None, repr=False, compare=False)
 
@@ -106,6 +112,10 @@ class BoxFrontier:
         b = np.asarray(boxes, dtype=float)
         return cls(np.ascontiguousarray(b[..., 0]), np.ascontiguousarray(b[..., 1]), scale,
                    split_ratio)
+
+    def _with(self, lo: np.ndarray, hi: np.ndarray, data: dict[str, np.ndarray] | None,
+              split_dim: np.ndarray | None = None) -> BoxFrontier:
+        return BoxFrontier(lo, hi, self.scale, self.split_ratio, data, split_dim)
 
     def __len__(self) -> int:
         return self.lo.shape[0]
@@ -121,8 +131,9 @@ class BoxFrontier:
         if idx.dtype == bool:
             idx = np.flatnonzero(idx)  # integer take is far faster than boolean row indexing
         k = None if self._split_dim is None else self._split_dim.take(idx)
-        return BoxFrontier(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), self.scale,
-                           self.split_ratio, k)
+        data = None if self.data is None else {
+            key: v.take(idx, axis=0) for key, v in self.data.items()}
+        return self._with(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), data, k)
 
     def _widths(self) -> np.ndarray:
         with np.errstate(over="ignore"):  # a huge box has an infinite width
@@ -151,23 +162,32 @@ class BoxFrontier:
         with np.errstate(over="ignore", invalid="ignore"):
             c = a + r * (b - a) if r != 0.5 else 0.5 * a + 0.5 * b
         ok = (a < c) & (c < b)
-        stuck = self.take(np.zeros(0, dtype=np.intp))
-        if not ok.all():
+        data = self.data
+        all_ok = bool(ok.all())
+        if not all_ok:
             with np.errstate(over="ignore", invalid="ignore"):
                 alt = (1.0 - r) * a + r * b  # b - a may overflow for huge boxes
             c = np.where(ok, c, alt)
             ok = (a < c) & (c < b)
-        if not ok.all():
+            all_ok = bool(ok.all())
+        if all_ok:
+            stuck = self._with(lo[:0], hi[:0], None if data is None else {
+                key: v[:0] for key, v in data.items()})
+        else:
             stuck = self.take(~ok)
             keep = np.flatnonzero(ok)
             lo, hi, c = lo[keep], hi[keep], c[keep]
             flat = np.arange(lo.shape[0]) * n + k[keep]
-        left_hi = hi.copy()
-        left_hi.ravel()[flat] = c
-        right_lo = lo.copy()
-        right_lo.ravel()[flat] = c
-        children = BoxFrontier(np.concatenate([lo, right_lo]), np.concatenate([left_hi, hi]),
-                               self.scale, self.split_ratio)
+            if data is not None:
+                data = {key: v.take(keep, axis=0) for key, v in data.items()}
+        # left halves first, then right halves: [lo, lo] x [hi with the cut, hi]
+        new_lo = np.concatenate([lo, lo])
+        new_hi = np.concatenate([hi, hi])
+        new_hi.ravel()[flat] = c
+        new_lo.ravel()[flat + lo.size] = c
+        if data is not None:  # both halves inherit what was proven on their parent
+            data = {key: np.concatenate([v, v]) for key, v in data.items()}
+        children = self._with(new_lo, new_hi, data)
         return children, stuck
 
     def bisect(self) -> BoxFrontier:
@@ -179,9 +199,12 @@ class BoxFrontier:
     def concat(parts: list[BoxFrontier]) -> BoxFrontier:
         if not parts:
             raise ValueError("nothing to concatenate")
-        return BoxFrontier(np.concatenate([p.lo for p in parts]),
-                           np.concatenate([p.hi for p in parts]), parts[0].scale,
-                           parts[0].split_ratio)
+        data = None
+        keys = [None if p.data is None else set(p.data) for p in parts]
+        if keys[0] is not None and all(k == keys[0] for k in keys):
+            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
+        return parts[0]._with(np.concatenate([p.lo for p in parts]),
+                              np.concatenate([p.hi for p in parts]), data)
 
 
 @dataclass
@@ -281,13 +304,15 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             # interruption leaves either the whole level or none of it in the result.
             i_in = np.flatnonzero(labels == INNER)
             i_out = np.flatnonzero(labels == OUTER)
-            i_und = np.flatnonzero((labels != INNER) & (labels != OUTER))
+            undecided = (labels != INNER) & (labels != OUTER)
+            # widths of every element (cheaper than gathering the undecided ones first)
+            small = frontier.width() <= eps
+            i_small = np.flatnonzero(undecided & small)
+            i_grow = np.flatnonzero(undecided & ~small)
             in_part = frontier.take(i_in) if i_in.size else None
             out_part = frontier.take(i_out) if keep_outer and i_out.size else None
-            undecided = frontier.take(i_und)
-            small = undecided.width() <= eps
-            parts = [undecided.take(small)] if small.any() else []
-            grow = undecided.take(~small)
+            parts = [frontier.take(i_small)] if i_small.size else []
+            grow = frontier.take(i_grow)
             if not len(grow):
                 nxt = grow
             elif splits:

@@ -56,6 +56,96 @@ def _image_rows(F: InclusionFunction, lo: np.ndarray, hi: np.ndarray) -> list[tu
     return [(img[:, j, 0], img[:, j, 1]) for j in range(img.shape[1])]
 
 
+class _ComponentClassifier:
+    """Box-target classifier that evaluates each constrained output element separately and
+    only on the boxes where it is still open.
+
+    An element proven inside its bounds on a box holds on every sub-box, so the proof is kept
+    in the frontier's per-box data (``data["open"]``: bit ``c`` set while element ``c`` is not
+    proven) and inherited by both halves of a bisected box: later levels evaluate only the
+    constraints that are still open, which is where SIVIA spends its time (thin boundary
+    regions usually involve one or two constraints).
+    """
+
+    def __init__(self, comps: list[Any], ylo: list[float], yhi: list[float],
+                 open_target: bool, step: int) -> None:
+        if len(comps) > 64:
+            raise ValueError("at most 64 constrained elements")
+        self.comps = [getattr(c, "unchecked", c) for c in comps]
+        self.ylo = [y if np.isfinite(y) else None for y in ylo]
+        self.yhi = [y if np.isfinite(y) else None for y in yhi]
+        self.open_target = open_target
+        self.step = step
+        k = len(comps)
+        self.dtype = np.uint8 if k <= 8 else np.uint16 if k <= 16 else \
+            np.uint32 if k <= 32 else np.uint64
+        self.bits = [(self.dtype(1 << c), ~self.dtype(1 << c)) for c in range(k)]
+        self.all_open = self.dtype((1 << k) - 1) if k < 64 else self.dtype(2**64 - 1)
+
+    def _test(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
+        """(inside, outside) proven for element ``c`` over the boxes ``lo``, ``hi`` (N, n)."""
+        l, h = self.comps[c](lo, hi)
+        yl, yh = self.ylo[c], self.yhi[c]
+        ins = out = None
+        if yl is not None:
+            if self.open_target:
+                ins, out = l > yl, h <= yl
+            else:
+                ins, out = l >= yl, h < yl
+        if yh is not None:
+            if self.open_target:
+                i2, o2 = h < yh, l >= yh
+            else:
+                i2, o2 = h <= yh, l > yh
+            ins = i2 if ins is None else ins & i2
+            out = o2 if out is None else out | o2
+        if np.ndim(ins) == 0 or np.ndim(out) == 0:  # a constant element
+            N = lo.shape[0]
+            return np.broadcast_to(ins, (N,)), np.broadcast_to(out, (N,))
+        return ins, out
+
+    def _bounds(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        N = lo.shape[0]
+        if N <= self.step:
+            return self._test(c, lo, hi)
+        inside = np.empty(N, dtype=bool)
+        outside = np.empty(N, dtype=bool)
+        for i0 in range(0, N, self.step):
+            i1 = min(i0 + self.step, N)
+            inside[i0:i1], outside[i0:i1] = self._test(c, lo[i0:i1], hi[i0:i1])
+        return inside, outside
+
+    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return self._classify(fr)
+
+    def _classify(self, fr: BoxFrontier) -> np.ndarray:
+        N = len(fr)
+        data = fr.data if fr.data is not None else {}
+        mask = data.get("open")
+        if mask is None or mask.shape != (N,) or mask.dtype != self.dtype:
+            mask = np.full(N, self.all_open, dtype=self.dtype)
+        outer = np.zeros(N, dtype=bool)
+        for c, (bit, clear) in enumerate(self.bits):
+            idx = np.flatnonzero(mask & bit)
+            if idx.size == 0:
+                continue
+            if idx.size > 0.9 * N:  # nearly all open: evaluating all avoids the gathers
+                ins, out = self._bounds(c, fr.lo, fr.hi)
+                outer |= out  # a proven element cannot be violated anywhere on its box
+                mask[ins] &= clear
+            else:
+                ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
+                outer[idx[out]] = True
+                sel = idx[ins]
+                mask[sel] = mask.take(sel) & clear
+        data["open"] = mask
+        fr.data = data
+        labels = (mask == 0).view(np.int8)  # INNER = 1 where every element is proven
+        labels[outer] = OUTER
+        return labels
+
+
 def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
     """Classifier of boxes X by their image enclosure F(X) against a target set Y.
 
@@ -71,6 +161,11 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
         rows_lo = [(j, float(ylo[j])) for j in range(m) if np.isfinite(ylo[j])]
         rows_hi = [(j, float(yhi[j])) for j in range(m) if np.isfinite(yhi[j])]
         step = int(getattr(F, "chunk", 8192))
+        bounded = sorted({j for j, _ in rows_lo} | {j for j, _ in rows_hi})
+        comps = [F.component_evaluator(j) for j in bounded] if len(bounded) > 1 else []
+        if comps and all(c is not None for c in comps):
+            return _ComponentClassifier(comps, [float(ylo[j]) for j in bounded],
+                                        [float(yhi[j]) for j in bounded], open_target, step)
 
         def classify(fr: BoxFrontier) -> np.ndarray:
             N = len(fr)
@@ -193,11 +288,9 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=r)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="sivia")
-    # Every box comes from bisecting X0 and lies in it: the domain is attached after the
-    # construction, which spares the check of every box against it.
-    paving = Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
-                    outer=out.outer.boxes, n_discarded=out.n_discarded)
-    paving.domain = domain
+    # Every box comes from bisecting X0 and lies in it: no checks needed.
+    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, out.outer.boxes,
+                                 domain, out.n_discarded)
     paving.status = out.status
     paving.message = out.message
     paving.elapsed = out.elapsed

@@ -498,3 +498,36 @@ def test_undefined_on_part_of_the_box_gives_whole_line():
     fun = ca.Function("f", [x], [ca.atan(ca.log(x))])
     lo, hi = _single(fun, "natural", (-1.0, 1.0))
     assert lo == -math.inf and hi == math.inf
+
+
+def test_component_evaluator_equals_the_joint_evaluation():
+    x = ca.SX.sym("x", 3)
+    y = ca.vertcat(x[0] * x[1] - ca.sin(x[2]), ca.SX(1, 1), 2.5, ca.exp(x[0]) / (1 + x[1] ** 2))
+    F = cm.interval.inclusion(ca.Function("f", [x], [y]))
+    rng = np.random.default_rng(7)
+    lo = rng.uniform(-2, 2, (300, 3))
+    hi = lo + rng.uniform(0, 1, (300, 3))
+    joint = F(np.stack([lo, hi], axis=-1))[0]
+    for j in range(4):
+        ev = F.component_evaluator(j)
+        assert ev is F.component_evaluator(j)  # compiled once
+        l, h = ev(lo, hi)
+        np.testing.assert_array_equal(np.broadcast_to(l, (300,)), joint[:, j, 0])
+        np.testing.assert_array_equal(np.broadcast_to(h, (300,)), joint[:, j, 1])
+    assert F.component_evaluator(1)(lo, hi) == (0.0, 0.0)  # structural zero
+    # only what the element depends on is evaluated: x2 enters element 0 only
+    lo_nan = lo.copy()
+    lo_nan[:, 2] = np.nan
+    assert np.isfinite(F.component_evaluator(3)(lo_nan, hi)[0]).all()
+    with pytest.raises(IndexError):
+        F.component_evaluator(4)
+
+
+def test_component_evaluator_unavailable_cases():
+    x, p = ca.SX.sym("x", 2), ca.SX.sym("p")
+    two_inputs = cm.interval.inclusion(ca.Function("g", [x, p], [x * p]))
+    assert two_inputs.component_evaluator(0) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        centered = cm.interval.inclusion(ca.Function("h", [x], [x * x]), "centered")
+    assert centered.component_evaluator(0) is None

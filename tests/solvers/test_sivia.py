@@ -449,6 +449,80 @@ def test_frontier_split_and_bisect():
     assert sel.boxes.tolist() == fr.take(np.array([1])).boxes.tolist()
 
 
+def test_frontier_data_follows_the_boxes():
+    lo = np.array([[0.0, 0.0], [0.0, 0.0], [5.0, 5.0]])
+    hi = np.array([[1.0, 2.0], [2.0, 2.0], [5.0, 5.0]])  # the last box cannot be split
+    tag = np.array([10, 11, 12])
+    fr = BoxFrontier(lo, hi, data={"tag": tag})
+    assert fr.take(np.array([False, True, True])).data["tag"].tolist() == [11, 12]
+    ch, stuck = fr.split()
+    # left halves first, then right halves; each half keeps its parent's row
+    assert ch.data["tag"].tolist() == [10, 11, 10, 11]
+    assert ch.boxes.tolist() == [[[0, 1], [0, 1]], [[0, 1], [0, 2]],
+                                 [[0, 1], [1, 2]], [[1, 2], [0, 2]]]
+    assert stuck.data["tag"].tolist() == [12]
+    both = BoxFrontier.concat([ch, stuck])
+    assert both.data["tag"].tolist() == [10, 11, 10, 11, 12]
+    # parts without the same data keys lose it rather than misalign rows
+    assert BoxFrontier.concat([ch, BoxFrontier(lo, hi)]).data is None
+
+
+def test_component_classifier_records_the_proven_constraints(F_routh):
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(-3, 9, (400, 2))
+    hi = lo + rng.uniform(0, 1.5, (400, 2))
+    fr = BoxFrontier(lo.copy(), hi.copy())
+    classify = image_classifier(F_routh, Y_POS, open_target=True)
+    labels = classify(fr)
+    rows = _image_rows(F_routh, lo, hi)
+    proven = np.stack([r[0] > 0 for r in rows], axis=1)  # (N, 3)
+    refuted = np.stack([r[1] <= 0 for r in rows], axis=1)
+    mask = fr.data["open"]
+    for c in range(3):
+        assert ((mask >> c) & 1 == 0).tolist() == proven[:, c].tolist()
+    assert (labels == INNER).tolist() == proven.all(axis=1).tolist()
+    assert (labels == OUTER).tolist() == refuted.any(axis=1).tolist()
+    # the children of an undecided box are not re-tested on what holds on their parent
+    und = fr.take(labels == UNDECIDED)
+    und.width()
+    children, _ = und.split()
+    half = len(children) // 2
+    assert (children.data["open"][:half] == und.data["open"]).all()
+    assert (children.data["open"][half:] == und.data["open"]).all()
+    inherited = classify(children)
+    child_rows = _image_rows(F_routh, children.lo, children.hi)
+    child_refuted = np.stack([r[1] <= 0 for r in child_rows], axis=1)
+    child_inner = np.stack([r[0] > 0 for r in child_rows], axis=1).all(axis=1)
+    # a proof kept from the parent can only decide more boxes
+    assert ((inherited == INNER) >= child_inner).all()
+    assert (inherited == OUTER).tolist() == child_refuted.any(axis=1).tolist()
+
+
+def test_component_and_joint_evaluation_give_the_same_paving(F_routh, routh_pavings):
+    joint = cm.interval.inclusion(_routh_function())
+    joint.component_evaluator = lambda j: None  # forces one evaluation of all outputs
+    P = cm.sivia(joint, X0_ROUTH, Y_POS, 0.1, open_target=True, progress=False)
+    Q = routh_pavings[0.1]
+    for view in ("inner", "boundary", "outer"):
+        a, b = getattr(P, view), getattr(Q, view)
+        assert sorted(map(tuple, a.reshape(len(a), -1).tolist())) == \
+            sorted(map(tuple, b.reshape(len(b), -1).tolist()))
+
+
+def test_two_sided_targets_per_component():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("ring", [x], [ca.vertcat(x[0] ** 2 + x[1] ** 2, x[0] - x[1])])
+    Y = cm.Box([1.0, -0.5], [4.0, 0.5])  # 1 <= |x|^2 <= 4 and |x0 - x1| <= 1/2
+    P = cm.sivia(f, cm.Box([-3, -3], [3, 3]), Y, 0.05, progress=False)
+    pts = samples(P.inner, 5).reshape(-1, 2)
+    r2 = (pts ** 2).sum(axis=1)
+    assert ((r2 >= 1) & (r2 <= 4) & (np.abs(pts[:, 0] - pts[:, 1]) <= 0.5)).all()
+    out = samples(P.outer, 5).reshape(-1, 2)
+    r2 = (out ** 2).sum(axis=1)
+    assert ((r2 < 1) | (r2 > 4) | (np.abs(out[:, 0] - out[:, 1]) > 0.5)).all()
+    assert P.volume("inner") > 0.75 * 1.41  # two pieces of a band: area about 1.41
+
+
 # ------------------------------------------------------------------ bad input
 def test_bad_inputs(F_routh):
     f = _routh_function()
