@@ -9,6 +9,7 @@ MODULES = [
     "casadi_cmpc.sets.box",
     "casadi_cmpc.model",
     "casadi_cmpc.interval.compiler",
+    "casadi_cmpc.interval.contractor",
     "casadi_cmpc.interval.ops",
     "casadi_cmpc.sets.polytope",
     "casadi_cmpc.sets.paving",

@@ -135,6 +135,11 @@ class BoxFrontier:
             key: v.take(idx, axis=0) for key, v in self.data.items()}
         return self._with(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), data, k)
 
+    def take_done(self, idx: np.ndarray) -> BoxFrontier:
+        """The boxes at the indices ``idx`` without their per-box data (for finished parts)."""
+        return BoxFrontier(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), self.scale,
+                           self.split_ratio)
+
     def _widths(self) -> np.ndarray:
         with np.errstate(over="ignore"):  # a huge box has an infinite width
             w = self.hi - self.lo
@@ -297,6 +302,8 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
                 break
             labels = np.asarray(classify(frontier), dtype=np.int8)
+            # finished elements need no per-element data: a frontier may drop it there
+            take_done = getattr(frontier, "take_done", frontier.take)
             n = len(frontier)
             if on_level is not None:
                 on_level(level, frontier, labels)
@@ -309,9 +316,9 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             small = frontier.width() <= eps
             i_small = np.flatnonzero(undecided & small)
             i_grow = np.flatnonzero(undecided & ~small)
-            in_part = frontier.take(i_in) if i_in.size else None
-            out_part = frontier.take(i_out) if keep_outer and i_out.size else None
-            parts = [frontier.take(i_small)] if i_small.size else []
+            in_part = take_done(i_in) if i_in.size else None
+            out_part = take_done(i_out) if keep_outer and i_out.size else None
+            parts = [take_done(i_small)] if i_small.size else []
             grow = frontier.take(i_grow)
             if not len(grow):
                 nxt = grow

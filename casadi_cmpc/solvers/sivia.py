@@ -146,6 +146,68 @@ class _ComponentClassifier:
         return labels
 
 
+def _box_difference(lo: np.ndarray, hi: np.ndarray, lo2: np.ndarray, hi2: np.ndarray
+                    ) -> np.ndarray:
+    """Boxes tiling ``[lo, hi] minus [lo2, hi2]`` for rows with ``[lo2, hi2] ⊆ [lo, hi]``.
+
+    For each dimension ``d``, the slabs below ``lo2_d`` and above ``hi2_d`` with dimensions
+    ``< d`` already cut to ``[lo2, hi2]`` and dimensions ``> d`` whole; empty slabs are left
+    out. Returns an (M, n, 2) array.
+    """
+    n = lo.shape[1]
+    out = []
+    for d in range(n):
+        for side in (0, 1):
+            rows = np.flatnonzero(lo2[:, d] > lo[:, d]) if side == 0 else \
+                np.flatnonzero(hi2[:, d] < hi[:, d])
+            if rows.size == 0:
+                continue
+            b_lo = np.concatenate([lo2[rows, :d], lo[rows, d:]], axis=1)
+            b_hi = np.concatenate([hi2[rows, :d], hi[rows, d:]], axis=1)
+            if side == 0:
+                b_hi[:, d] = lo2[rows, d]
+            else:
+                b_lo[:, d] = hi2[rows, d]
+            out.append(np.stack([b_lo, b_hi], axis=-1))
+    return np.concatenate(out) if out else np.zeros((0, n, 2))
+
+
+class _Contracting:
+    """Wraps a classifier: each box is first narrowed by a forward-backward contractor.
+
+    The contracted box replaces the box in the frontier (it holds every solution of the box),
+    the removed parts are recorded as outside boxes (so that the three views still tile the
+    domain), and a box the contractor proves to hold no solution is labelled OUTER whole.
+    """
+
+    def __init__(self, C: Any, classify: Any, keep_outer: bool) -> None:
+        self.C = C
+        self.classify = classify
+        self.keep_outer = keep_outer
+        self.removed: list[np.ndarray] = []
+        self.n_removed = 0
+
+    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+        lo2, hi2, empty = self.C(fr.lo, fr.hi)
+        keep = ~empty
+        shrunk = keep & ((lo2 > fr.lo) | (hi2 < fr.hi)).any(axis=1)
+        slabs = None
+        if shrunk.any():
+            i = np.flatnonzero(shrunk)
+            slabs = _box_difference(fr.lo[i], fr.hi[i], lo2[i], hi2[i])
+            e = keep[:, None]
+            fr.lo = np.where(e, lo2, fr.lo)
+            fr.hi = np.where(e, hi2, fr.hi)
+            fr._split_dim = None
+        labels = np.asarray(self.classify(fr), dtype=np.int8)
+        labels[empty] = OUTER
+        if slabs is not None:
+            self.n_removed += slabs.shape[0]
+            if self.keep_outer:
+                self.removed.append(slabs)
+        return labels
+
+
 def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
     """Classifier of boxes X by their image enclosure F(X) against a target set Y.
 
@@ -223,7 +285,8 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
 def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
           open_target: bool = False, split_ratio: float = 0.5, relative: bool = False,
           max_boxes: int = 5_000_000, time_limit: float | None = None,
-          keep_outer: bool = True, progress: bool | None = None) -> Paving:
+          keep_outer: bool = True, contract: bool = False,
+          progress: bool | None = None) -> Paving:
     """Set inversion via interval analysis: pave ``{x in X0 : f(x) in Y}`` (thesis Alg 4.1).
 
     Parameters
@@ -248,6 +311,13 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
         boundary boxes (still sound).
     keep_outer : bool
         Keep the discarded boxes (``paving.outer``) for drawing; they are always counted.
+    contract : bool
+        Narrow every box with a forward-backward (HC4) contractor generated from the same
+        CasADi graph before testing it (:func:`casadi_cmpc.interval.contractor`, target Y or,
+        for a set target, its bounding box). The parts removed are outside boxes. Needs a
+        casadi.Function or a natural InclusionFunction. Pays off when constraints are thin
+        or tight (equalities, narrow bands); on wide inequality regions the inclusion test
+        alone is usually cheaper.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
 
@@ -285,12 +355,22 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     if relative:
         scale = np.where(domain.diam > 0, domain.diam, 1.0)
     classify = image_classifier(F, Y, open_target)
+    if contract:
+        from ..interval.contractor import contractor
+
+        target = Y if isinstance(Y, Box) else Y.bounding_box()
+        classify = _Contracting(contractor(F.fun, target), classify, keep_outer)
     fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=r)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="sivia")
+    outer, n_discarded = out.outer.boxes, out.n_discarded
+    if contract:
+        if classify.removed:
+            outer = np.concatenate([outer] + classify.removed)
+        n_discarded += classify.n_removed
     # Every box comes from bisecting X0 and lies in it: no checks needed.
-    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, out.outer.boxes,
-                                 domain, out.n_discarded)
+    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, outer, domain,
+                                 n_discarded)
     paving.status = out.status
     paving.message = out.message
     paving.elapsed = out.elapsed

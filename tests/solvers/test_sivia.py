@@ -18,7 +18,7 @@ from casadi_cmpc.solvers.engine import (
     Status,
     branch_and_bound,
 )
-from casadi_cmpc.solvers.sivia import _image_rows, image_classifier
+from casadi_cmpc.solvers.sivia import _box_difference, _image_rows, image_classifier
 
 X0_ROUTH = cm.Box([-3, -3], [9, 9])
 Y_POS = cm.Box([0, 0, 0], [np.inf, np.inf, np.inf])
@@ -521,6 +521,52 @@ def test_two_sided_targets_per_component():
     r2 = (out ** 2).sum(axis=1)
     assert ((r2 < 1) | (r2 > 4) | (np.abs(out[:, 0] - out[:, 1]) > 0.5)).all()
     assert P.volume("inner") > 0.75 * 1.41  # two pieces of a band: area about 1.41
+
+
+def test_box_difference_tiles_the_removed_part():
+    rng = np.random.default_rng(11)
+    lo = rng.uniform(-1, 0, (50, 3))
+    hi = rng.uniform(1, 2, (50, 3))
+    t = rng.uniform(0, 1, (2, 50, 3))
+    keep = rng.uniform(size=(50, 3)) < 0.3  # some sides untouched
+    lo2 = np.where(keep, lo, lo + t[0] * (hi - lo) * 0.5)
+    hi2 = np.where(keep[:, ::-1], hi, hi - t[1] * (hi - lo) * 0.5)
+    slabs = _box_difference(lo, hi, lo2, hi2)
+    vol = np.prod(hi - lo, axis=1).sum() - np.prod(hi2 - lo2, axis=1).sum()
+    assert float(box_volume(slabs).sum()) == pytest.approx(vol, rel=1e-12)
+    pts = lo[:, None] + rng.uniform(size=(50, 200, 3)) * (hi - lo)[:, None]
+    for i in range(50):
+        inside_kept = ((pts[i] > lo2[i]) & (pts[i] < hi2[i])).all(axis=1)
+        in_slabs = boxes_contain_points(slabs, pts[i]).any(axis=0)
+        # every point is in the contracted box or in a slab (up to the shared faces)
+        assert (inside_kept | in_slabs).all()
+    assert _box_difference(lo, hi, lo, hi).shape == (0, 3, 2)
+
+
+def test_contraction_keeps_the_routh_paving_sound(F_routh):
+    P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.1, open_target=True, contract=True,
+                 progress=False)
+    assert P.status == Status.PROVED
+    assert (routh(samples(P.inner)) > 0).all()
+    # the removed slabs hold no solution: some component is <= 0 at every point
+    assert (routh(samples(P.outer)) <= 0).any(axis=2).all()
+    assert_covers(P, AREA_ROUTH)
+    plain = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.1, open_target=True, progress=False)
+    assert P.volume("boundary") < plain.volume("boundary")
+
+
+def test_contraction_on_a_thin_constraint():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("line", [x], [x[0] + 2 * x[1]])
+    X0, Y = cm.Box([0, 0], [1, 1]), cm.Box([1.0], [1.0])  # the segment x0 + 2 x1 = 1
+    plain = cm.sivia(f, X0, Y, 0.01, progress=False)
+    P = cm.sivia(f, X0, Y, 0.01, contract=True, progress=False)
+    assert P.volume("inner") == plain.volume("inner") == 0.0
+    assert P.volume("boundary") < 0.5 * plain.volume("boundary")
+    t = np.linspace(0, 1, 101)
+    on_line = np.stack([t, (1 - t) / 2], axis=1)
+    assert P.contains(on_line).all()  # the solution set stays inside inner + boundary
+    assert_covers(P, 1.0)
 
 
 # ------------------------------------------------------------------ bad input
