@@ -429,16 +429,26 @@ class InclusionFunction:
             return self._centered_impl(boxes, n)
 
     def _centered_impl(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
-        mids = []
-        rads = []
+        il: list[np.ndarray] = []
+        ih: list[np.ndarray] = []
+        mids: list[np.ndarray] = []
+        rad: list[np.ndarray] = []  # one (N_i,) array per joint coordinate
         for b in boxes:
-            lo, hi = b[..., 0], b[..., 1]
-            m = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-            r = arith.up(np.maximum(m - lo, hi - m))
-            mids.append(np.stack([m, m], axis=-1))
-            rads.append(np.ascontiguousarray(r.T))  # (d_i, N_i)
-        rad = [row for r in rads for row in r]  # one (N_i,) array per joint coordinate
-        o = self._raw(self._g_eval, list(mids) + list(boxes), self._g_nnz)
+            lo = np.ascontiguousarray(b[..., 0].T)  # (d_i, N_i)
+            hi = np.ascontiguousarray(b[..., 1].T)
+            m = 0.5 * lo
+            m += 0.5 * hi
+            np.maximum(m, lo, out=m)  # the midpoint must lie in the box
+            np.minimum(m, hi, out=m)
+            r = np.maximum(m - lo, hi - m)
+            rad.extend(arith._up_(r))
+            il.append(lo)
+            ih.append(hi)
+            mids.append(m)
+        # the thin midpoint boxes [m, m] share one array for both bounds: the evaluator
+        # never writes into its inputs
+        o: list[list[Any]] = [[None] * k for k in self._g_nnz]
+        self._g_eval(mids + il, mids + ih, o)
         k = self.n_out
         fm, jac, fb = o[:k], o[k], o[k + 1:]
         # S_r >= sum_j mag(J_rj) * rad_j, so that J (Z - m) lies in [-S, S]. The terms are
