@@ -191,20 +191,19 @@ class _Contracting:
         lo2, hi2, empty = self.C(fr.lo, fr.hi)
         keep = ~empty
         shrunk = keep & ((lo2 > fr.lo) | (hi2 < fr.hi)).any(axis=1)
-        slabs = None
         if shrunk.any():
             i = np.flatnonzero(shrunk)
             slabs = _box_difference(fr.lo[i], fr.hi[i], lo2[i], hi2[i])
             e = keep[:, None]
-            fr.lo = np.where(e, lo2, fr.lo)
-            fr.hi = np.where(e, hi2, fr.hi)
-            fr._split_dim = None
-        labels = np.asarray(self.classify(fr), dtype=np.int8)
-        labels[empty] = OUTER
-        if slabs is not None:
+            lo_c, hi_c = np.where(e, lo2, fr.lo), np.where(e, hi2, fr.hi)
+            # the removed slabs and the contracted boxes replace the boxes together, so that
+            # an interruption of the classification below still leaves a tiling
             self.n_removed += slabs.shape[0]
             if self.keep_outer:
                 self.removed.append(slabs)
+            fr.lo, fr.hi, fr._split_dim = lo_c, hi_c, None
+        labels = np.asarray(self.classify(fr), dtype=np.int8)
+        labels[empty] = OUTER
         return labels
 
 

@@ -369,6 +369,28 @@ def test_keyboard_interrupt_in_classifier_returns_partial_result(F_routh):
     assert (routh(samples(P.inner)) > 0).all()
 
 
+def test_keyboard_interrupt_after_contraction_keeps_a_tiling(F_routh, monkeypatch):
+    import importlib
+
+    sivia_mod = importlib.import_module("casadi_cmpc.solvers.sivia")
+    calls = []
+    real = sivia_mod._ComponentClassifier.__call__
+
+    def interrupted(self, fr):
+        calls.append(len(fr))
+        if len(calls) == 5:  # after the contraction of level 4
+            raise KeyboardInterrupt
+        return real(self, fr)
+
+    monkeypatch.setattr(sivia_mod._ComponentClassifier, "__call__", interrupted)
+    P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.05, open_target=True, contract=True,
+                 progress=False)
+    assert P.status == Status.BUDGET and P.message == "interrupted"
+    assert len(P.outer) == P.n_discarded > 0  # slabs removed by the contractor included
+    assert_covers(P, AREA_ROUTH)
+    assert (routh(samples(P.inner)) > 0).all()
+
+
 def test_keyboard_interrupt_while_splitting_keeps_a_tiling(F_routh):
     class Fragile(BoxFrontier):
         splits = 0
