@@ -164,8 +164,12 @@ class BoxFrontier:
         a = lo.take(flat)
         b = hi.take(flat)
         r = self.split_ratio
-        with np.errstate(over="ignore", invalid="ignore"):
-            c = a + r * (b - a) if r != 0.5 else 0.5 * a + 0.5 * b
+        if r == 0.5:
+            c = 0.5 * a  # 0.5 a + 0.5 b cannot overflow
+            c += 0.5 * b
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                c = a + r * (b - a)
         ok = (a < c) & (c < b)
         data = self.data
         all_ok = bool(ok.all())
