@@ -389,6 +389,56 @@ class InclusionFunction:
         cache[j] = ev
         return ev
 
+    def component_core(self, j: int) -> tuple[Callable[..., Any], list[tuple[str, float]]] | None:
+        """Element ``j`` of the output as ``core(x)`` followed by affine steps, for solvers.
+
+        When element ``j`` is ``core(x) + c`` (also ``c + core``, ``core - c``) or
+        ``core(x) * c`` with ``c > 0``, possibly nested, returns ``(ev, steps)``: ``ev`` is the
+        natural enclosure of ``core`` (same conventions as :meth:`component_evaluator`) and
+        ``steps`` lists ``("add", c)`` / ``("mul", c)``, outermost first. A test such as
+        ``f_j > y`` then becomes ``core > y'`` with the threshold moved back through the
+        steps (rounded in the safe direction by the caller), which spares the interval
+        operations of the steps. ``None`` when element ``j`` has no such step or when
+        :meth:`component_evaluator` is not available.
+        """
+        if self.component_evaluator(j) is None:
+            return None
+        cache = self.__dict__.setdefault("_cores", {})
+        if j in cache:
+            return cache[j]
+        nz = np.flatnonzero(self._out_pos[0] == j)
+        result = None
+        if nz.size:
+            f = self.fun
+            syms = f.sx_in()
+            e = f.call(syms)[0].nz[int(nz[0])]
+            steps: list[tuple[str, float]] = []
+            while not e.is_constant() and not e.is_symbolic() and e.n_dep() == 2:
+                a, b = e.dep(0), e.dep(1)
+                if e.is_op(ca.OP_ADD) and b.is_constant():
+                    steps.append(("add", float(b)))
+                    e = a
+                elif e.is_op(ca.OP_ADD) and a.is_constant():
+                    steps.append(("add", float(a)))
+                    e = b
+                elif e.is_op(ca.OP_SUB) and b.is_constant():
+                    steps.append(("add", -float(b)))
+                    e = a
+                elif e.is_op(ca.OP_MUL) and b.is_constant() and float(b) > 0:
+                    steps.append(("mul", float(b)))
+                    e = a
+                elif e.is_op(ca.OP_MUL) and a.is_constant() and float(a) > 0:
+                    steps.append(("mul", float(a)))
+                    e = b
+                else:
+                    break
+            finite = all(np.isfinite(c) for _, c in steps)
+            if steps and finite and not e.is_constant():
+                core = InclusionFunction(ca.Function(f"{f.name()}_core{j}", syms, [e]))
+                result = (core.component_evaluator(0), steps)
+        cache[j] = result
+        return result
+
     # --------------------------------------------------------------- centered
     def _build_centered(self) -> None:
         """One SX Function G(z_mid..., z_box...) -> [f(z_mid)..., J(z_box), f(z_box)...].

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -9,6 +10,7 @@ import numpy as np
 
 from .._validate import as_boxes
 from ..exceptions import DimensionError
+from ..interval import arith as _ar
 from ..interval.compiler import InclusionFunction
 from ..sets.base import SetBase
 from ..sets.box import Box
@@ -56,6 +58,39 @@ def _image_rows(F: InclusionFunction, lo: np.ndarray, hi: np.ndarray) -> list[tu
     return [(img[:, j, 0], img[:, j, 1]) for j in range(img.shape[1])]
 
 
+@dataclass(frozen=True)
+class Thresholds:
+    """Bounds ``[y_lo, y_hi]`` on one output element, as thresholds on an expression ``g``
+    with ``f_j = steps(g)``: ``in_*`` for proofs of ``f_j`` inside, ``out_*`` for proofs of
+    ``f_j`` outside (None: no bound on that side). E.g. ``f_j = g + c`` and ``f_j > y`` is
+    proven by ``g > in_lo = up(y - c)``, ``f_j <= y`` by ``g <= out_lo = dn(y - c)``."""
+
+    in_lo: float | None
+    out_lo: float | None
+    in_hi: float | None
+    out_hi: float | None
+
+    @classmethod
+    def through(cls, y_lo: float, y_hi: float, steps: list[tuple[str, float]]) -> Thresholds:
+        """Move the bounds back through ``steps`` (outermost first), rounding each threshold
+        so that the proofs stay valid for the exact real values."""
+        in_lo = out_lo = y_lo if np.isfinite(y_lo) else None
+        in_hi = out_hi = y_hi if np.isfinite(y_hi) else None
+        with np.errstate(all="ignore"):
+            for kind, c in steps:
+                if kind == "add":  # f = g + c: f > y <=> g > y - c
+                    down, upw = (lambda t, c=c: _ar.dn(t - c)), (lambda t, c=c: _ar.up(t - c))
+                else:  # "mul", c > 0: f = g c: f > y <=> g > y / c
+                    down, upw = (lambda t, c=c: _ar.dnm(t / c)), \
+                        (lambda t, c=c: _ar.upm(t / c))
+                if in_lo is not None:
+                    in_lo, out_lo = upw(in_lo), down(out_lo)
+                if in_hi is not None:
+                    in_hi, out_hi = down(in_hi), upw(out_hi)
+        # NaN (an overflow turned into inf - inf) makes every comparison False: no proof
+        return cls(*(None if v is None else float(v) for v in (in_lo, out_lo, in_hi, out_hi)))
+
+
 class _ComponentClassifier:
     """Box-target classifier that evaluates each constrained output element separately and
     only on the boxes where it is still open.
@@ -67,13 +102,12 @@ class _ComponentClassifier:
     regions usually involve one or two constraints).
     """
 
-    def __init__(self, comps: list[Any], ylo: list[float], yhi: list[float],
-                 open_target: bool, step: int) -> None:
+    def __init__(self, comps: list[tuple[Any, Thresholds]], open_target: bool,
+                 step: int) -> None:
         if len(comps) > 64:
             raise ValueError("at most 64 constrained elements")
-        self.comps = [getattr(c, "unchecked", c) for c in comps]
-        self.ylo = [y if np.isfinite(y) else None for y in ylo]
-        self.yhi = [y if np.isfinite(y) else None for y in yhi]
+        self.comps = [getattr(ev, "unchecked", ev) for ev, _ in comps]
+        self.thresholds = [t for _, t in comps]
         self.open_target = open_target
         self.step = step
         k = len(comps)
@@ -85,18 +119,18 @@ class _ComponentClassifier:
     def _test(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
         """(inside, outside) proven for element ``c`` over the boxes ``lo``, ``hi`` (N, n)."""
         l, h = self.comps[c](lo, hi)
-        yl, yh = self.ylo[c], self.yhi[c]
+        t = self.thresholds[c]
         ins = out = None
-        if yl is not None:
+        if t.in_lo is not None:
             if self.open_target:
-                ins, out = l > yl, h <= yl
+                ins, out = l > t.in_lo, h <= t.out_lo
             else:
-                ins, out = l >= yl, h < yl
-        if yh is not None:
+                ins, out = l >= t.in_lo, h < t.out_lo
+        if t.in_hi is not None:
             if self.open_target:
-                i2, o2 = h < yh, l >= yh
+                i2, o2 = h < t.in_hi, l >= t.out_hi
             else:
-                i2, o2 = h <= yh, l > yh
+                i2, o2 = h <= t.in_hi, l > t.out_hi
             ins = i2 if ins is None else ins & i2
             out = o2 if out is None else out | o2
         if np.ndim(ins) == 0 or np.ndim(out) == 0:  # a constant element
@@ -223,10 +257,16 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
         rows_hi = [(j, float(yhi[j])) for j in range(m) if np.isfinite(yhi[j])]
         step = int(getattr(F, "chunk", 8192))
         bounded = sorted({j for j, _ in rows_lo} | {j for j, _ in rows_hi})
-        comps = [F.component_evaluator(j) for j in bounded] if len(bounded) > 1 else []
-        if comps and all(c is not None for c in comps):
-            return _ComponentClassifier(comps, [float(ylo[j]) for j in bounded],
-                                        [float(yhi[j]) for j in bounded], open_target, step)
+        evs = [F.component_evaluator(j) for j in bounded] if len(bounded) > 1 else []
+        if evs and all(ev is not None for ev in evs):
+            comps = []
+            for j, ev in zip(bounded, evs, strict=True):
+                core = F.component_core(j)  # f_j = affine steps of a core expression
+                steps: list[tuple[str, float]] = []
+                if core is not None:
+                    ev, steps = core
+                comps.append((ev, Thresholds.through(float(ylo[j]), float(yhi[j]), steps)))
+            return _ComponentClassifier(comps, open_target, step)
 
         def classify(fr: BoxFrontier) -> np.ndarray:
             N = len(fr)

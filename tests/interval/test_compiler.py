@@ -531,3 +531,19 @@ def test_component_evaluator_unavailable_cases():
         warnings.simplefilter("ignore")
         centered = cm.interval.inclusion(ca.Function("h", [x], [x * x]), "centered")
     assert centered.component_evaluator(0) is None
+
+
+def test_component_core_peels_affine_steps():
+    x = ca.SX.sym("x", 2)
+    y = ca.vertcat(3 * (x[0] ** 2 + 1) - 2, 5 + x[1], x[0] * x[1], -2 * x[0] + 1, x[0] - x[1])
+    F = cm.interval.inclusion(ca.Function("f", [x], [y]))
+    ev, steps = F.component_core(0)
+    assert steps == [("add", -2.0), ("mul", 3.0), ("add", 1.0)]
+    lo, hi = np.array([[-1.0, 0.0]]), np.array([[2.0, 1.0]])
+    l, h = ev(lo, hi)
+    assert l[0] <= 0.0 and 4.0 <= h[0] <= 4.0 + 1e-12  # the core is x0^2 on [-1, 2]
+    assert F.component_core(1)[1] == [("add", 5.0)]
+    assert F.component_core(2) is None  # no affine step
+    core3 = F.component_core(3)  # negative factors are not peeled
+    assert core3 is None or all(c > 0 for kind, c in core3[1] if kind == "mul")
+    assert F.component_core(4) is None  # x0 - x1: no constant

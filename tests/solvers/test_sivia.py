@@ -6,6 +6,8 @@ from fractions import Fraction
 import casadi as ca
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import casadi_cmpc as cm
 from casadi_cmpc.exceptions import DimensionError, UnboundedSetError
@@ -18,7 +20,12 @@ from casadi_cmpc.solvers.engine import (
     Status,
     branch_and_bound,
 )
-from casadi_cmpc.solvers.sivia import _box_difference, _image_rows, image_classifier
+from casadi_cmpc.solvers.sivia import (
+    Thresholds,
+    _box_difference,
+    _image_rows,
+    image_classifier,
+)
 
 X0_ROUTH = cm.Box([-3, -3], [9, 9])
 Y_POS = cm.Box([0, 0, 0], [np.inf, np.inf, np.inf])
@@ -589,6 +596,42 @@ def test_contraction_on_a_thin_constraint():
     on_line = np.stack([t, (1 - t) / 2], axis=1)
     assert P.contains(on_line).all()  # the solution set stays inside inner + boundary
     assert_covers(P, 1.0)
+
+
+finite = st.floats(min_value=-1e300, max_value=1e300, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(y=finite, c=finite, pos=st.floats(min_value=1e-300, max_value=1e300),
+       g=st.lists(finite, min_size=1, max_size=8), ulps=st.integers(-3, 3))
+def test_moved_thresholds_prove_only_true_facts(y, c, pos, g, ulps):
+    """g > in_lo must imply g + c > y (resp. g * pos > y) exactly, and so on."""
+    for kind, k in (("add", c), ("mul", pos)):
+        t = Thresholds.through(y, y, [(kind, k)])
+        # values at and around the thresholds, where rounding matters
+        near = [v for v in (t.in_lo, t.out_lo, t.in_hi, t.out_hi) if v is not None]
+        cand = list(g) + [float(np.nextafter(v, np.inf if ulps > 0 else -np.inf) * 1.0)
+                          for v in near if np.isfinite(v)] + near
+        for v in cand:
+            if not np.isfinite(v):
+                continue
+            exact = Fraction(v) + Fraction(k) if kind == "add" else Fraction(v) * Fraction(k)
+            if t.in_lo is not None and v > t.in_lo:
+                assert exact > Fraction(y)
+            if t.out_lo is not None and v <= t.out_lo:
+                assert exact <= Fraction(y)
+            if t.in_hi is not None and v < t.in_hi:
+                assert exact < Fraction(y)
+            if t.out_hi is not None and v >= t.out_hi:
+                assert exact >= Fraction(y)
+
+
+def test_thresholds_of_one_sided_and_nested_bounds():
+    t = Thresholds.through(0.0, np.inf, [("add", -1.0), ("mul", 2.0)])  # 2 g - 1 >= 0
+    assert t.in_hi is None and t.out_hi is None
+    assert 0.5 <= t.in_lo <= 0.5 + 1e-15 and 0.5 - 1e-15 <= t.out_lo <= 0.5
+    assert Thresholds.through(-np.inf, np.inf, [("add", 1.0)]) == Thresholds(None, None,
+                                                                             None, None)
 
 
 # ------------------------------------------------------------------ bad input
