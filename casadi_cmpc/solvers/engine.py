@@ -313,13 +313,13 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 on_level(level, frontier, labels)
             # Everything of this level is computed before anything is recorded, so that an
             # interruption leaves either the whole level or none of it in the result.
-            i_in = np.flatnonzero(labels == INNER)
-            i_out = np.flatnonzero(labels == OUTER)
+            i_in = (labels == INNER).nonzero()[0]
+            i_out = (labels == OUTER).nonzero()[0]
             undecided = (labels != INNER) & (labels != OUTER)
             # widths of every element (cheaper than gathering the undecided ones first)
             small = frontier.width() <= eps
-            i_small = np.flatnonzero(undecided & small)
-            i_grow = np.flatnonzero(undecided & ~small)
+            i_small = (undecided & small).nonzero()[0]
+            i_grow = (undecided & ~small).nonzero()[0]
             in_part = take_done(i_in) if i_in.size else None
             out_part = take_done(i_out) if keep_outer and i_out.size else None
             parts = [take_done(i_small)] if i_small.size else []

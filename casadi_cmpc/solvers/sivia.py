@@ -161,7 +161,7 @@ class _ComponentClassifier:
             mask = np.full(N, self.all_open, dtype=self.dtype)
         outer = np.zeros(N, dtype=bool)
         for c, (bit, clear) in enumerate(self.bits):
-            idx = np.flatnonzero(mask & bit)
+            idx = (mask & bit).nonzero()[0]
             if idx.size == 0:
                 continue
             if idx.size > 0.9 * N:  # nearly all open: evaluating all avoids the gathers
