@@ -338,6 +338,22 @@ class InclusionFunction:
     def _natural(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         return self._pack(self._raw(self._eval, boxes, [len(p) for p in self._out_pos]), n)
 
+    def _single_natural(self) -> bool:
+        """One input, one output, plain natural evaluation (what the element evaluators need)."""
+        return (self.n_in == 1 and self.n_out == 1 and self._keep is None and not self._widen
+                and (self.kind == "natural" or self.centered_fallback))
+
+    def _traced(self) -> tuple[ca.Function, list[ca.SX], list[ca.SX]]:
+        """``(g, inputs, outputs)``: the Function rebuilt with one work slot per node (to trace
+        what each output element depends on) and its symbolic inputs and output expressions.
+        Built once."""
+        if "_traced_fun" not in self.__dict__:
+            syms = self.fun.sx_in()
+            outs = self.fun.call(syms)
+            g = ca.Function(self.fun.name(), syms, outs, {"live_variables": False})
+            self._traced_fun = (g, syms, outs)
+        return self._traced_fun
+
     def component_evaluator(self, j: int) -> Callable[[np.ndarray, np.ndarray], Any] | None:
         """Natural enclosure of one element of the (single) output, for solvers.
 
@@ -349,8 +365,7 @@ class InclusionFunction:
         ``(0.0, 0.0)``. Cached per element. ``ev.unchecked`` is the same without its own
         ``np.errstate`` (for callers that set it once around many calls).
         """
-        if (self.n_in != 1 or self.n_out != 1 or self._keep is not None or self._widen
-                or (self.kind != "natural" and not self.centered_fallback)):
+        if not self._single_natural():
             return None
         cache = self.__dict__.setdefault("_components", {})
         if j in cache:
@@ -365,15 +380,8 @@ class InclusionFunction:
             cache[j] = zero
             return zero
         k = int(nz[0])
-        f = self.fun
-        syms = f.sx_in()
-        g = ca.Function(f.name(), syms, f.call(syms), {"live_variables": False})
-        gen = _Codegen(g)
-        gen.only = _needed_instructions(g, [0], nonzeros={k})
-        src = gen.build()
-        namespace: dict[str, Any] = {"_A": arith, "_K": gen.const_table, "np": np}
-        exec(compile(src, f"<interval:{f.name()}[{j}]>", "exec"), namespace)  # noqa: S102
-        raw = namespace["_eval"]
+        g = self._traced()[0]
+        raw = _compile(g, keep_outputs=[0], nonzeros={k})[0]
         size = g.nnz_out(0)
 
         def unchecked(lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
@@ -401,17 +409,19 @@ class InclusionFunction:
         operations of the steps. ``None`` when element ``j`` has no such step or when
         :meth:`component_evaluator` is not available.
         """
-        if self.component_evaluator(j) is None:
+        if not self._single_natural():
             return None
         cache = self.__dict__.setdefault("_cores", {})
         if j in cache:
             return cache[j]
+        if not 0 <= j < self.size_out[0]:
+            raise IndexError(f"output element {j} out of range ({self.size_out[0]} elements)")
         nz = np.flatnonzero(self._out_pos[0] == j)
         result = None
         if nz.size:
             f = self.fun
-            syms = f.sx_in()
-            e = f.call(syms)[0].nz[int(nz[0])]
+            _, syms, outs = self._traced()
+            e = outs[0].nz[int(nz[0])]
             steps: list[tuple[str, float]] = []
             while not e.is_constant() and not e.is_symbolic() and e.n_dep() == 2:
                 a, b = e.dep(0), e.dep(1)
@@ -650,11 +660,11 @@ def _needed_instructions(g: ca.Function, outputs: Sequence[int],
 
 
 def _compile(fun: ca.Function, widen: frozenset[int] = frozenset(),
-             keep_outputs: Sequence[int] | None = None
+             keep_outputs: Sequence[int] | None = None, nonzeros: set[int] | None = None
              ) -> tuple[Callable[..., None], str]:
     gen = _Codegen(fun, widen)
     if keep_outputs is not None:
-        gen.only = _needed_instructions(fun, keep_outputs)
+        gen.only = _needed_instructions(fun, keep_outputs, nonzeros)
         gen.out_map = {int(o): i for i, o in enumerate(keep_outputs)}
     src = gen.build()
     namespace: dict[str, Any] = {"_A": arith, "_K": gen.const_table, "np": np}

@@ -76,17 +76,19 @@ class Thresholds:
         so that the proofs stay valid for the exact real values."""
         in_lo = out_lo = y_lo if np.isfinite(y_lo) else None
         in_hi = out_hi = y_hi if np.isfinite(y_hi) else None
+
+        def back(t: float, kind: str, c: float, upward: bool) -> float:
+            """y - c (for f = g + c) or y / c (for f = g c, c > 0), rounded up or down."""
+            if kind == "add":
+                return _ar.up(t - c) if upward else _ar.dn(t - c)
+            return _ar.upm(t / c) if upward else _ar.dnm(t / c)
+
         with np.errstate(all="ignore"):
-            for kind, c in steps:
-                if kind == "add":  # f = g + c: f > y <=> g > y - c
-                    down, upw = (lambda t, c=c: _ar.dn(t - c)), (lambda t, c=c: _ar.up(t - c))
-                else:  # "mul", c > 0: f = g c: f > y <=> g > y / c
-                    down, upw = (lambda t, c=c: _ar.dnm(t / c)), \
-                        (lambda t, c=c: _ar.upm(t / c))
+            for kind, c in steps:  # f > y <=> g > back(y); inner proofs need the larger one
                 if in_lo is not None:
-                    in_lo, out_lo = upw(in_lo), down(out_lo)
+                    in_lo, out_lo = back(in_lo, kind, c, True), back(out_lo, kind, c, False)
                 if in_hi is not None:
-                    in_hi, out_hi = down(in_hi), upw(out_hi)
+                    in_hi, out_hi = back(in_hi, kind, c, False), back(out_hi, kind, c, True)
         # NaN (an overflow turned into inf - inf) makes every comparison False: no proof
         return cls(*(None if v is None else float(v) for v in (in_lo, out_lo, in_hi, out_hi)))
 
