@@ -93,26 +93,38 @@ class Thresholds:
         return cls(*(None if v is None else float(v) for v in (in_lo, out_lo, in_hi, out_hi)))
 
 
+def _defined(l: Any, h: Any) -> Any:
+    """Where an output enclosure ``[l, h]`` proves the element defined at every point of its
+    box: no NaN bound ("possibly undefined") and not the whole line (which is what a
+    possibly undefined result becomes once NaN bounds are replaced by infinities)."""
+    return ~(np.isnan(l) | np.isnan(h) | ((l == -np.inf) & (h == np.inf)))
+
+
 class _ComponentClassifier:
-    """Box-target classifier that evaluates each constrained output element separately and
-    only on the boxes where it is still open.
+    """Box-target classifier that evaluates each output element separately and only on the
+    boxes where it is still open.
 
     An element proven inside its bounds on a box holds on every sub-box, so the proof is kept
     in the frontier's per-box data (``data["open"]``: bit ``c`` set while element ``c`` is not
-    proven) and inherited by both halves of a bisected box: later levels evaluate only the
-    constraints that are still open, which is where SIVIA spends its time (thin boundary
-    regions usually involve one or two constraints).
+    proven; for more than 64 elements a boolean ``(N, k)`` array) and inherited by both halves
+    of a bisected box: later levels evaluate only the constraints that are still open, which
+    is where SIVIA spends its time (thin boundary regions usually involve one or two
+    constraints). An element without a finite bound in Y must still be proven *defined*
+    (inner means "f is defined and in Y at every point").
     """
 
     def __init__(self, comps: list[tuple[Any, Thresholds]], open_target: bool,
                  step: int) -> None:
-        if len(comps) > 64:
-            raise ValueError("at most 64 constrained elements")
         self.comps = [getattr(ev, "unchecked", ev) for ev, _ in comps]
         self.thresholds = [t for _, t in comps]
         self.open_target = open_target
         self.step = step
         k = len(comps)
+        self.k = k
+        self.wide = k > 64
+        if self.wide:
+            self.dtype = np.dtype(bool)
+            return
         self.dtype = np.uint8 if k <= 8 else np.uint16 if k <= 16 else \
             np.uint32 if k <= 32 else np.uint64
         self.bits = [(self.dtype(1 << c), ~self.dtype(1 << c)) for c in range(k)]
@@ -135,6 +147,8 @@ class _ComponentClassifier:
                 i2, o2 = h <= t.in_hi, l > t.out_hi
             ins = i2 if ins is None else ins & i2
             out = o2 if out is None else out | o2
+        if ins is None:  # no finite bound: inside Y wherever the element is defined
+            ins, out = _defined(l, h), False
         if np.ndim(ins) == 0 or np.ndim(out) == 0:  # a constant element
             N = lo.shape[0]
             return np.broadcast_to(ins, (N,)), np.broadcast_to(out, (N,))
@@ -153,6 +167,8 @@ class _ComponentClassifier:
 
     def __call__(self, fr: BoxFrontier) -> np.ndarray:
         with np.errstate(all="ignore"):
+            if self.wide:
+                return self._classify_wide(fr)
             return self._classify(fr)
 
     def _classify(self, fr: BoxFrontier) -> np.ndarray:
@@ -178,6 +194,27 @@ class _ComponentClassifier:
         data["open"] = mask
         fr.data = data
         labels = (mask == 0).view(np.int8)  # INNER = 1 where every element is proven
+        labels[outer] = OUTER
+        return labels
+
+    def _classify_wide(self, fr: BoxFrontier) -> np.ndarray:
+        """The same with a boolean ``(N, k)`` mask (more than 64 elements)."""
+        N = len(fr)
+        data = fr.data if fr.data is not None else {}
+        mask = data.get("open")
+        if mask is None or mask.shape != (N, self.k) or mask.dtype != self.dtype:
+            mask = np.ones((N, self.k), dtype=bool)
+        outer = np.zeros(N, dtype=bool)
+        for c in range(self.k):
+            idx = mask[:, c].nonzero()[0]
+            if idx.size == 0:
+                continue
+            ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
+            outer[idx[out]] = True
+            mask[idx[ins], c] = False
+        data["open"] = mask
+        fr.data = data
+        labels = (~mask.any(axis=1)).view(np.int8)
         labels[outer] = OUTER
         return labels
 
@@ -214,6 +251,9 @@ class _Contracting:
     The contracted box replaces the box in the frontier (it holds every solution of the box),
     the removed parts are recorded as outside boxes (so that the three views still tile the
     domain), and a box the contractor proves to hold no solution is labelled OUTER whole.
+    The contracted box is widened by one float on each side that was cut, so that the
+    removed (closed) slabs do not share a face with it: every point of a slab, faces
+    included, lies outside the contracted box and is therefore proven to be no solution.
     """
 
     def __init__(self, C: Any, classify: Any, keep_outer: bool) -> None:
@@ -226,6 +266,12 @@ class _Contracting:
     def __call__(self, fr: BoxFrontier) -> np.ndarray:
         lo2, hi2, empty = self.C(fr.lo, fr.hi)
         keep = ~empty
+        # Solutions may lie on the faces of the contracted box, which the removed slabs
+        # would share: keep one float more on each cut side, so that every point of a
+        # (closed) removed slab lies strictly outside [lo2, hi2] and is proven no solution.
+        with np.errstate(all="ignore"):
+            lo2 = np.where(lo2 > fr.lo, np.maximum(np.nextafter(lo2, -np.inf), fr.lo), fr.lo)
+            hi2 = np.where(hi2 < fr.hi, np.minimum(np.nextafter(hi2, np.inf), fr.hi), fr.hi)
         shrunk = keep & ((lo2 > fr.lo) | (hi2 < fr.hi)).any(axis=1)
         if shrunk.any():
             i = np.flatnonzero(shrunk)
@@ -258,14 +304,16 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
         rows_lo = [(j, float(ylo[j])) for j in range(m) if np.isfinite(ylo[j])]
         rows_hi = [(j, float(yhi[j])) for j in range(m) if np.isfinite(yhi[j])]
         step = int(getattr(F, "chunk", 8192))
-        bounded = sorted({j for j, _ in rows_lo} | {j for j, _ in rows_hi})
-        evs = [F.component_evaluator(j) for j in bounded] if len(bounded) > 1 else []
+        bounded = {j for j, _ in rows_lo} | {j for j, _ in rows_hi}
+        # elements without a finite bound are tested for definedness only
+        free = [j for j in range(m) if j not in bounded]
+        evs = [F.component_evaluator(j) for j in range(m)] if m > 1 else []
         if evs and all(ev is not None for ev in evs):
             comps = []
-            for j, ev in zip(bounded, evs, strict=True):
-                core = F.component_core(j)  # f_j = affine steps of a core expression
+            for j, ev in enumerate(evs):
+                core = F.component_core(j) if j in bounded else None
                 steps: list[tuple[str, float]] = []
-                if core is not None:
+                if core is not None:  # f_j = affine steps of a core expression
                     ev, steps = core
                 comps.append((ev, Thresholds.through(float(ylo[j]), float(yhi[j]), steps)))
             return _ComponentClassifier(comps, open_target, step)
@@ -294,6 +342,8 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
                     else:
                         inner &= hi_j <= y
                         outer |= lo_j > y
+                for j in free:  # inner also means "f_j defined at every point"
+                    inner &= _defined(*rows[j])
                 lab = labels[i0:i1]
                 np.putmask(lab, inner, INNER)
                 np.putmask(lab, outer & ~inner, OUTER)
@@ -365,10 +415,19 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     Returns
     -------
     Paving
-        ``inner``: boxes proven inside ``f^-1(Y)`` (every point); ``boundary``: undecided
-        boxes narrower than eps; ``outer``: boxes proven outside; ``n_discarded``. Extra
-        attributes: ``status`` (:class:`~casadi_cmpc.solvers.engine.Status`), ``message``,
-        ``elapsed`` (s), ``levels``, ``n_classified``.
+        Three views of closed boxes that together cover X0 (neighbouring boxes share faces):
+
+        * ``inner``: at every point of each box, faces included, ``f`` is defined and
+          ``f(x) ∈ Y`` (the interior of Y with ``open_target=True``);
+        * ``outer``: at no point of each box, faces included, is ``f`` defined with
+          ``f(x) ∈ Y`` (points where f is undefined are not solutions);
+        * ``boundary``: undecided boxes (narrower than eps, or left over when a limit
+          stopped the search); nothing is claimed about them.
+
+        A point on a face shared by an inner and a boundary box is a solution; on a face
+        shared by an outer and a boundary box it is not. ``n_discarded`` counts the outer
+        boxes. Extra attributes: ``status`` (:class:`~casadi_cmpc.solvers.engine.Status`),
+        ``message``, ``elapsed`` (s), ``levels``, ``n_classified``.
 
     Examples
     --------
