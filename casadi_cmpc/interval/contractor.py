@@ -126,8 +126,12 @@ class _State:
 
 
 def _real(lo: Any, hi: Any) -> tuple[Any, Any]:
-    """NaN bounds (no information) become -inf / +inf."""
-    return _fmax(lo, -_INF), _fmin(hi, _INF)
+    """An enclosure with a NaN bound (no information) becomes the whole line, on both sides:
+    a NaN on one side also says nothing about the other."""
+    bad = np.isnan(lo) | np.isnan(hi)
+    if np.any(bad):
+        return np.where(bad, -_INF, lo), np.where(bad, _INF, hi)
+    return lo, hi
 
 
 def _flag(s: _State, mask: Any) -> None:
@@ -135,7 +139,13 @@ def _flag(s: _State, mask: Any) -> None:
 
 
 def _meet(s: _State, i: int, lo: Any, hi: Any) -> None:
-    """Narrow node ``i`` to its intersection with [lo, hi] (NaN bounds are ignored)."""
+    """Narrow node ``i`` to its intersection with the projection [lo, hi]. A projection with
+    a NaN bound (an overflow or an undefined operation met on the way) narrows nothing, on
+    either side."""
+    bad = np.isnan(lo) | np.isnan(hi)
+    if np.any(bad):
+        lo = np.where(bad, -_INF, lo)
+        hi = np.where(bad, _INF, hi)
     s.L[i] = _fmax(s.L[i], lo)
     s.H[i] = _fmin(s.H[i], hi)
 
@@ -161,9 +171,12 @@ def _factor(s: _State, i: int, pl: Any, ph: Any, ql: Any, qh: Any) -> None:
     if np.any(ray):
         ul, uh = s.L[i], s.H[i]
         pos = pl > 0
-        # u <= nu (reached with q < 0 when p > 0, with q > 0 when p < 0) or u >= pu
+        # u <= nu (reached with q < 0 when p > 0, with q > 0 when p < 0) or u >= pu; a
+        # ray bound that comes out NaN (an overflowed quotient) keeps the whole ray
         nu = A.upm(np.where(pos, pl / ql, ph / qh))
         pu = A.dnm(np.where(pos, pl / qh, ph / ql))
+        nu = np.where(np.isnan(nu), _INF, nu)
+        pu = np.where(np.isnan(pu), -_INF, pu)
         n_ok = np.where(pos, ql < 0, qh > 0) & (ul <= nu)
         p_ok = np.where(pos, qh > 0, ql < 0) & (pu <= uh)
         lo = np.where(ray, np.where(n_ok, ul, np.where(p_ok, pu, _INF)), lo)
