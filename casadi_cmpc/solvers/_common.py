@@ -46,14 +46,19 @@ def single_box(data: Any, name: str, d: int | None = None) -> np.ndarray:
     return b[0]
 
 
-def positive_eps(eps: Any) -> float:
-    """Return ``eps`` as a float, raising ValueError unless it is finite and positive."""
+def positive_eps(eps: Any, name: str = "eps") -> float:
+    """Return ``eps`` as a float, raising ValueError unless it is a finite positive number
+    (a string such as ``"0.1"`` or a bool is refused, not converted)."""
+    if isinstance(eps, (str, bytes, bool, np.bool_)):
+        raise ValueError(
+            f"{name} must be a positive number; got the {type(eps).__name__} {eps!r} "
+            f"(write {name}=0.1, not {name}='0.1')")
     try:
         value = float(eps)
     except (TypeError, ValueError):
-        raise ValueError(f"eps must be a positive number; got {eps!r}") from None
+        raise ValueError(f"{name} must be a positive number; got {eps!r}") from None
     if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"eps must be a positive number; got {eps}")
+        raise ValueError(f"{name} must be a positive number; got {eps!r}")
     return value
 
 

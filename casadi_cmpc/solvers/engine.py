@@ -26,6 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..exceptions import UnboundedSetError
+from ._common import positive_eps
 
 __all__ = ["INNER", "OUTER", "UNDECIDED", "Status", "BoxFrontier", "BnBOutcome",
            "branch_and_bound"]
@@ -282,8 +283,7 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
         warnings.simplefilter("ignore")
         from tqdm.auto import tqdm
 
-    if not np.isfinite(eps) or eps <= 0:
-        raise ValueError(f"eps must be a positive number; got {eps}")
+    eps = positive_eps(eps)
     if isinstance(frontier, BoxFrontier) and not (
             np.isfinite(frontier.lo).all() and np.isfinite(frontier.hi).all()):
         raise UnboundedSetError("the initial box of a branch and bound must be bounded")

@@ -211,7 +211,10 @@ class _Search:
             nlp["g"] = ca.vec(self.G.fun(x))
         opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
                 "ipopt.max_iter": 200, "ipopt.tol": 1e-10, "ipopt.constr_viol_tol": 1e-10,
-                "error_on_fail": False}
+                "error_on_fail": False,
+                # IPOPT backs off from points where f is undefined (NaN) by itself; CasADi
+                # would print one warning per such evaluation
+                "show_eval_warnings": False}
         return ca.nlpsol("minimize_local", "ipopt", nlp, opts)
 
     def _run_nlp(self, args: dict[str, Any]) -> dict[str, Any] | None:

@@ -25,6 +25,7 @@ from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
 from ..interval.modal import SemanticExtension
 from ..sets.box import Box
 from ..sets.paving import Paving
+from ._common import positive_eps
 from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
 
 __all__ = ["quantified_sivia"]
@@ -403,8 +404,7 @@ def quantified_sivia(f: ca.Function, X0: Any, U: Any, W: Any, Y: Any, eps: float
         raise ValueError(f"method 'alg5.1' is the 1-dimensional algorithm; f has {p} "
                          "outputs (use 'alg5.2')")
     opts = _check_options(options, meth)
-    if not np.isfinite(eps) or eps <= 0:
-        raise ValueError(f"eps must be a positive number; got {eps}")
+    eps = positive_eps(eps)
     ext = SemanticExtension(f, mean_value=opts["mean_value"])
     classify = _QuantifiedClassifier(ext, n, m, l, ub, wb, Y, opts)
     domain = Box(x0[:, 0], x0[:, 1])
