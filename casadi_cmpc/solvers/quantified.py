@@ -116,8 +116,11 @@ class _QuantifiedClassifier:
         return np.concatenate([X, Uc, Wb], axis=1)
 
     def _inside(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Outer approximation ``[lo, hi]`` (modal) included in Y, per output: (P, p)."""
-        return (lo >= self.ylo) & (hi <= self.yhi)
+        """Outer approximation ``[lo, hi]`` (modal) included in Y, per output: (P, p).
+
+        An infinite or NaN bound of the outer approximation may stand for "f possibly
+        undefined" (also where Y is unbounded on that side), so it proves nothing."""
+        return (lo >= self.ylo) & (hi <= self.yhi) & np.isfinite(lo) & np.isfinite(hi)
 
     def _excluded(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Inner approximation ``[lo, hi]`` not included in Y for some output: (P,)."""

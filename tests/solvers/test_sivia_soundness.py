@@ -186,3 +186,19 @@ def test_eps_must_be_a_positive_number(eps):
     f = ca.Function("f", [y], [y])
     with pytest.raises(ValueError, match="eps must be a positive number"):
         cm.sivia(f, cm.Box([0], [1]), cm.Box([0], [1]), eps=eps)
+
+
+def test_quantified_inner_boxes_hold_only_points_where_f_is_defined():
+    """The same rule for quantified set inversion (∀w ∃u): log(x1 + w) must be defined for
+    every w at every point of an inner box."""
+    from casadi_cmpc.solvers.quantified import quantified_sivia
+
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    w = ca.SX.sym("w")
+    f = ca.Function("f", [x, u, w], [ca.vertcat(x[0] + u, ca.log(x[1] + w))])
+    P = quantified_sivia(f, cm.Box([-1, -1], [1, 1]), cm.Box([-0.5], [0.5]),
+                         cm.Box([-0.1], [0.1]), cm.Box([-0.5, -np.inf], [0.5, np.inf]),
+                         eps=0.25, progress=False)
+    assert P.inner.shape[0] > 0
+    assert (P.inner[:, 1, 0] > 0.1).all()  # x1 + w > 0 for all w in [-0.1, 0.1]
