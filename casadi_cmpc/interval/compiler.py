@@ -18,7 +18,13 @@ import casadi as ca
 import numpy as np
 
 from .._validate import as_boxes
-from ..exceptions import CmpcWarning, DimensionError, UnsupportedOperationError
+from ..exceptions import (
+    CmpcWarning,
+    DimensionError,
+    FreeSymbolError,
+    UnsupportedOperationError,
+)
+from . import _derivative as _dv
 from . import arith
 
 __all__ = ["inclusion", "InclusionFunction"]
@@ -75,6 +81,12 @@ def _as_sx_function(fun: Any) -> ca.Function:
             raise UnsupportedOperationError(
                 f"Function '{fun.name()}' is not an SX Function and cannot be expanded to one "
                 f"({exc}); build it from casadi.SX symbols") from exc
+    if fun.has_free():
+        free = ", ".join(str(v) for v in fun.get_free())
+        raise FreeSymbolError(
+            f"Function '{fun.name()}' depends on symbols that are not among its inputs: "
+            f"{free}; add them as inputs (or substitute numbers for them with "
+            "casadi.substitute) before building an interval inclusion")
     for i in range(fun.n_in()):
         if not fun.sparsity_in(i).is_dense():
             raise DimensionError(
@@ -130,10 +142,10 @@ class _Codegen:
             lo, hi = fn(*args)
         lo = float(np.asarray(lo).reshape(-1)[0])
         hi = float(np.asarray(hi).reshape(-1)[0])
-        if np.isnan(lo):
-            lo = -np.inf
-        if np.isnan(hi):
-            hi = np.inf
+        if np.isnan(lo) or np.isnan(hi):
+            # possibly undefined: stays NaN on both sides (as the operations' own results),
+            # never "any real", which a later bounded operation (sin, atan) would narrow
+            lo = hi = np.nan
         self.consts[out] = (lo, hi)
 
     def _exact_const(self, out: int, ins: Sequence[int], op: int) -> bool:
@@ -158,7 +170,7 @@ class _Codegen:
             outs = list(f.instruction_output(k))
             if op == ca.OP_CONST:
                 v = float(f.instruction_constant(k))
-                if k in self.widen and v != 0.0:
+                if k in self.widen:
                     lo, hi = _widen_constant(v)
                     self.consts[outs[0]] = (lo, hi)
                 else:
@@ -454,35 +466,39 @@ class InclusionFunction:
         """One SX Function G(z_mid..., z_box...) -> [f(z_mid)..., J(z_box), f(z_box)...].
 
         The Jacobian's expressions share the nodes of f(z_box), so their common
-        subexpressions are evaluated once.
+        subexpressions are evaluated once. G is built from f with its literal constants as
+        symbols (:class:`~._derivative.ParamGraph`), which the compiler reads back as exact
+        thin constants: CasADi cannot fold literals while differentiating, and only the
+        constants its differentiation rules create are widened. A jump guard marks the
+        outputs that may jump (or leave their domain) on a box: there the natural
+        enclosure is used.
         """
         f = self.fun
+        graph = _dv.ParamGraph(f)
+        zb = graph.inputs
         zm = [ca.SX.sym(f"m{i}", f.sparsity_in(i)) for i in range(self.n_in)]
-        zb = [ca.SX.sym(f"z{i}", f.sparsity_in(i)) for i in range(self.n_in)]
+        fp = ca.Function(f"{f.name()}_p", zb + [graph.params], graph.outputs)
+        outs_m = fp.call(zm + [graph.params])
+        outs_b = graph.outputs
         z = ca.vertcat(*[ca.vec(s) for s in zb])
-        outs_m = f.call(zm)
-        outs_b = f.call(zb)
         y = ca.vertcat(*[ca.vec(o) for o in outs_b])
         jac = ca.jacobian(y, z)
-        # The f(z_mid) and f(z_box) parts re-evaluate f's own instructions on fresh symbols,
-        # which reproduces its constants; the Jacobian shares their nodes. Constants that only
-        # the Jacobian uses were created (and possibly folded) by differentiation: widened.
-        g = ca.Function(f"{f.name()}_centered", zm + zb, list(outs_m) + [jac] + list(outs_b),
-                        {"live_variables": False})
-        k = self.n_out
-        widen = _derived_constants(g, [i for i in range(g.n_out()) if i != k])
-        self._g_eval, self._g_source = _compile(g, widen)
+        g = graph.function(f"{f.name()}_centered", zm + zb, list(outs_m) + [jac] + list(outs_b))
+        self._g_eval, self._g_source = _compile(g, _dv.rule_constants(g))  # type: ignore[arg-type]
         self._g_nnz = [g.nnz_out(i) for i in range(g.n_out())]
         rows, cols = jac.sparsity().get_triplet()
         # row offsets of each output inside y, and nonzero rows of each output
         self._jac_rows = np.asarray(rows, dtype=np.intp)
         self._jac_cols = np.asarray(cols, dtype=np.intp)
         self._y_nz: list[list[int]] = []  # per output: the row of y of each of its nonzeros
+        masks: list[int] = []
         off = 0
         for i in range(self.n_out):
             sp = f.sparsity_out(i)
             self._y_nz.append([off + int(k) for k in sp.find()])
+            masks.extend(_dv.output_masks(graph, sp, i))
             off += sp.numel()
+        self._guard = _dv.JumpGuard(graph, masks)
 
     def _centered(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         with np.errstate(all="ignore"):
@@ -531,6 +547,7 @@ class InclusionFunction:
             else:
                 sums[r] = term
                 counts[r] = 1
+        jump = self._guard(boxes, n) if self._guard.active else None  # (N, rows of y)
         res: list[list[Any]] = []
         for i in range(k):
             col = []
@@ -544,7 +561,12 @@ class InclusionFunction:
                 S = sums[row] * (1.0 + (kk + 4) * arith.U) + (kk + 1) * arith.TINY
                 lo = arith._dn_(ml - S)
                 hi = arith._up_(mh + S)
-                col.append((np.maximum(lo, bl), np.minimum(hi, bh)))
+                lo, hi = np.maximum(lo, bl), np.minimum(hi, bh)
+                if jump is not None and jump[:, row].any():
+                    # the mean-value form is not valid where f may jump on the box
+                    lo = np.where(jump[:, row], bl, lo)
+                    hi = np.where(jump[:, row], bh, hi)
+                col.append((lo, hi))
             res.append(col)
         return self._pack(res, n)
 
@@ -578,26 +600,36 @@ class InclusionFunction:
 
 
 def _sanitize(out: np.ndarray) -> None:
-    """Replace NaN bounds ("no information") by -inf / +inf in place."""
+    """Replace results with a NaN in either bound ("possibly undefined, no information") by
+    the whole line ``[-inf, inf]`` (both bounds), in place."""
     nan = np.isnan(out)
     if nan.any():
-        out[..., 0][nan[..., 0]] = -np.inf
-        out[..., 1][nan[..., 1]] = np.inf
+        out[nan.any(axis=-1)] = (-np.inf, np.inf)
 
 
-# Relative widening of constants that CasADi created while differentiating (it folds constant
-# subexpressions such as 1/3 or 0.1 - 1 in floating point): covers a few roundings.
+# Relative widening of constants that CasADi may have folded while differentiating (it folds
+# constant subexpressions such as 3 * 0.1 or 0.1 - 1 in floating point): covers a few
+# thousand roundings; the absolute part covers underflow (1e-200 * 1e-200 folds to 0).
 DERIVED_CONST_REL = 2.0 ** -40
 
 
 def _widen_constant(v: float) -> tuple[float, float]:
+    """Interval around a constant that may be the rounded result of folding."""
     m = abs(v) * DERIVED_CONST_REL + arith.ABS_LIBM
     return v - m, v + m
 
 
 def _derived_constants(g: ca.Function, exact_outputs: Sequence[int]) -> frozenset[int]:
-    """Instructions of ``g`` (built with live_variables=False) that load a constant not used by
-    any of ``exact_outputs``: constants that exist only in the derived (Jacobian) outputs."""
+    """Instructions of ``g`` (built with live_variables=False) that load a constant used by a
+    derived output (an output not in ``exact_outputs``).
+
+    All of them are widened, also those shared with ``exact_outputs``: CasADi caches numeric
+    constants, so a value folded while differentiating (``3 * 0.1`` gives
+    ``0.30000000000000004``) may be the very node of a literal of f, and no exact value (not
+    even 0 or 1: ``10 * 0.1`` folds to 1.0) proves that it was not folded. Exact outputs that
+    share such a constant see it widened too (sound, slightly loose); derivative paths that
+    need f exact build their graph with :class:`~._derivative.ParamGraph` instead.
+    """
     needed: set[int] = set()
     n = g.n_instructions()
     ids = [g.instruction_id(k) for k in range(n)]
@@ -605,7 +637,7 @@ def _derived_constants(g: ca.Function, exact_outputs: Sequence[int]) -> frozense
     for k in range(n - 1, -1, -1):
         op = ids[k]
         if op == ca.OP_OUTPUT:
-            if g.instruction_output(k)[0] in exact:
+            if g.instruction_output(k)[0] not in exact:
                 needed.add(g.instruction_input(k)[0])
             continue
         outs = g.instruction_output(k)
@@ -614,7 +646,7 @@ def _derived_constants(g: ca.Function, exact_outputs: Sequence[int]) -> frozense
         if outs and outs[0] in needed:
             needed.update(g.instruction_input(k))
     return frozenset(k for k in range(n) if ids[k] == ca.OP_CONST
-                     and g.instruction_output(k)[0] not in needed)
+                     and g.instruction_output(k)[0] in needed)
 
 
 class _Restricted:
