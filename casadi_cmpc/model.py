@@ -15,6 +15,7 @@ from .exceptions import (
     ModelError,
     UnboundedSetError,
 )
+from .interval._derivative import JacobianInclusion
 from .interval.compiler import InclusionFunction
 from .sets.box import Box
 
@@ -294,31 +295,37 @@ class Model:
                            kind: str = "natural") -> Callable[..., np.ndarray]:
         """Interval Jacobian of f with respect to ``x``, ``u`` or ``w`` over boxes.
 
+        Parameters
+        ----------
+        wrt : {"x", "u", "w"}
+        kind : {"natural"}
+            The entries are natural inclusions of CasADi's symbolic derivatives.
+
         Returns
         -------
         callable ``J(X, U=None, W=None) -> ndarray (N, n, d_wrt, 2)``
-            Interval matrices containing ``df/d<wrt>(x, u, w)`` for all x, u, w in the boxes
-            (used by zonotope evolution, thesis Thm 4.3/4.4).
+            Interval matrices for the mean-value theorem (used by zonotope evolution, thesis
+            Thm 4.3/4.4): for all points ``a``, ``b`` of a box that differ only in ``wrt``,
+            ``f(b) - f(a)`` lies in ``J (b - a)`` row by row. Row ``i`` is ``[-inf, inf]`` on
+            boxes where ``f_i`` may jump or leave its domain (floor, sign, comparisons,
+            if_else, fmod, remainder, copysign, atan2's branch cut, poles such as ``1/x``
+            across 0): CasADi's derivative of a jump (e.g. 0 for floor) says nothing there.
+            Literal constants of f enter exactly; constants created by differentiation are
+            widened.
         """
         wrt = _check_wrt(wrt)
-
-        def build() -> InclusionFunction:
-            # [df/dwrt, f] in one Function: constants used only by the derivative were created
-            # (and possibly folded in floating point) by differentiation and are widened
-            sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
-            jac = ca.densify(ca.jacobian(self.f, sym))
-            g = ca.Function(f"{self.name}_jac_{wrt}", [self.x, self.u, self._w_sym],
-                            [jac, self.f], ["x", "u", "w"], [f"df_d{wrt}", "x_next"],
-                            {"live_variables": False})
-            return InclusionFunction(g, kind, derived_outputs=(0,), evaluate=(0,))
-
-        F = self._cached(("jac_inclusion", wrt, kind), build)
+        kind = str(kind).lower()
+        if kind != "natural":
+            raise ValueError(f"jacobian_inclusion supports kind='natural' only; got '{kind}'")
+        idx = _WRT.index(wrt)
+        F = self._cached(("jac_inclusion", wrt),
+                         lambda: JacobianInclusion(self.function, wrt=idx))
         d = {"x": self.n, "u": self.m, "w": self.l}[wrt]
-        n = self.n
 
         def J(X: Any, U: Any = None, W: Any = None) -> np.ndarray:
-            out = _ModelInclusion(self, F)(X, U, W)  # (N, n*d, 2), column-major
-            return out.reshape(out.shape[0], d, n, 2).transpose(0, 2, 1, 3)
+            boxes, n_b = _model_boxes(self, X, U, W)
+            out = F(boxes, n_b)
+            return out.reshape(n_b, self.n, d, 2)
 
         return J
 
@@ -563,17 +570,26 @@ class _ModelInclusion:
         self.kind = F.kind
 
     def __call__(self, X: Any, U: Any = None, W: Any = None) -> np.ndarray:
-        m = self.model
-        if U is None:
-            U = m.U.as_array()
-        if W is None:
-            W = m.W_box.as_array()
-        elif m.w is None:
-            raise ModelError(f"model '{m.name}' has no disturbance; do not pass W")
-        Xb = as_boxes(X, m.n, "X")
-        Ub = as_boxes(U, m.m, "U")
-        Wb = as_boxes(W, m.l, "W")
-        return self.F(Xb, Ub, Wb)[0]
+        boxes, _ = _model_boxes(self.model, X, U, W)
+        return self.F(*boxes)[0]
 
     def __repr__(self) -> str:
         return f"<{self.kind} inclusion of model '{self.model.name}'>"
+
+
+def _model_boxes(m: Model, X: Any, U: Any, W: Any) -> tuple[list[np.ndarray], int]:
+    """Validated ``(N_i, d_i, 2)`` boxes of x, u, w (U, W default to the model's) and the
+    common batch size."""
+    if U is None:
+        U = m.U.as_array()
+    if W is None:
+        W = m.W_box.as_array()
+    elif m.w is None:
+        raise ModelError(f"model '{m.name}' has no disturbance; do not pass W")
+    boxes = [as_boxes(X, m.n, "X"), as_boxes(U, m.m, "U"), as_boxes(W, m.l, "W")]
+    ns = {b.shape[0] for b in boxes}
+    n_b = max(ns)
+    if len(ns - {1, n_b}) > 0:
+        raise DimensionError(f"batch sizes of X, U, W do not broadcast: "
+                             f"{[b.shape[0] for b in boxes]}")
+    return boxes, n_b
