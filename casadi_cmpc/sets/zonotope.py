@@ -692,7 +692,7 @@ class Zonotope(SetBase):
                         f"{type(other).__name__}")
 
     # --------------------------------------------------------------- bisection
-    def bisect(self, index: int | None = None, cover: bool = False
+    def bisect(self, index: int | None = None, cover: bool = True
                ) -> tuple[Zonotope, Zonotope]:
         r"""Bisect along one generator (thesis Thm 4.1).
 
@@ -702,18 +702,21 @@ class Zonotope(SetBase):
             Generator to split. Default: ``k`` of (4.13), the first generator holding the
             largest ``|h_ij|`` (4.12).
         cover : bool
-            When True and the new centres ``p ∓ h_k/2`` are not exact floats, each half
-            receives one more generator (its exact centre error) so that
-            ``LZ ∪ RZ ⊇ Z`` holds exactly.
+            True (default): when the new centres ``p ∓ h_k/2`` (or ``h_k/2``) are not exact
+            floats, each half receives one more generator holding the exact rounding error,
+            so that ``LZ ∪ RZ ⊇ Z`` holds exactly; no generator is added when they are
+            exact. False: the plain floating-point halves with the same number of
+            generators; their union may then miss points of ``Z`` near the split (e.g.
+            ``Zonotope([1e16], [[3.0]])``, whose centres ``1e16 ∓ 1.5`` round).
 
         Returns
         -------
         (Zonotope, Zonotope)
             ``LZ = (p - h_k/2) ⊕ [h_1 ... h_k/2 ... h_m] B^m`` and
-            ``RZ = (p + h_k/2) ⊕ [h_1 ... h_k/2 ... h_m] B^m`` with ``LZ ∪ RZ = Z``.
-            The halves overlap when the generators are linearly dependent (Fig 4.4); for
-            independent generators they share only a facet (Thm 4.2, Fig 4.5; see
-            :meth:`bisect_complete`).
+            ``RZ = (p + h_k/2) ⊕ [h_1 ... h_k/2 ... h_m] B^m`` with ``LZ ∪ RZ ⊇ Z`` (equal up
+            to the rounding-error generators). The halves overlap when the generators are
+            linearly dependent (Fig 4.4); for independent generators they share only a facet
+            (Thm 4.2, Fig 4.5; see :meth:`bisect_complete`).
         """
         G = self._G
         m = G.shape[1]
@@ -742,7 +745,7 @@ class Zonotope(SetBase):
             out.append(Zonotope(cc, np.hstack(cols)))
         return out[0], out[1]
 
-    def bisect_complete(self, method: str = "svd", cover: bool = False
+    def bisect_complete(self, method: str = "svd", cover: bool = True
                         ) -> tuple[Zonotope, Zonotope]:
         """Complete bisection (thesis Thm 4.2): halves that share only a facet.
 
@@ -1130,7 +1133,7 @@ def evolve(model: Any, Z: Zonotope, u: Any = None, W: Any = None,
     Parameters
     ----------
     model : Model
-        The system ``x+ = f(x, u, w)``; ``f`` must be continuously differentiable in x.
+        The system ``x+ = f(x, u, w)``.
     Z : Zonotope
         ``p ⊕ H B^m`` of dimension ``model.n``.
     u : array_like, shape (m,), or Box / array_like, shape (m, 2), optional
@@ -1151,7 +1154,11 @@ def evolve(model: Any, Z: Zonotope, u: Any = None, W: Any = None,
         Jacobian over the bounding box ``□Z`` of ``Z``, times ``H``), i.e. the mean-value
         form (4.16) bounded by Kühn's inclusion (4.14)-(4.15). Every interval operation is
         rounded outward, so ``f(x, u, w)`` lies inside for all ``x in Z``, ``u in U`` and
-        ``w in W``.
+        ``w in W``. A row ``i`` for which the mean-value form is not valid on ``□Z`` (``f_i``
+        may jump there: floor, sign, comparisons, if_else, fmod, a pole ...; see
+        :meth:`Model.jacobian_inclusion`) or whose Jacobian is unbounded is the natural
+        interval enclosure of ``f_i(□Z, U, W)`` instead (zero generator entries plus its own
+        box generator).
 
     Raises
     ------
@@ -1160,7 +1167,8 @@ def evolve(model: Any, Z: Zonotope, u: Any = None, W: Any = None,
     ModelError
         ``u`` is missing for a model with inputs.
     UnboundedSetError
-        An interval enclosure is unbounded (e.g. a division by an interval containing 0).
+        A row has neither a bounded mean-value enclosure nor a bounded interval hull (e.g.
+        a division by an interval containing 0).
     """
     if not isinstance(Z, Zonotope):
         raise TypeError(f"Z must be a Zonotope; got {type(Z).__name__}")
@@ -1178,11 +1186,19 @@ def evolve(model: Any, Z: Zonotope, u: Any = None, W: Any = None,
     Xb = Z.bounding_box().as_array()[None]
     fp = model.inclusion(inclusion)(P, Ub, Wb)[0]  # (n, 2)
     J = model.jacobian_inclusion("x")(Xb, Ub, Wb)[0]  # (n, n, 2)
-    if not (np.isfinite(fp).all() and np.isfinite(J).all()):
-        raise UnboundedSetError(
-            "evolve(): the interval enclosure of f(p, U, W) or of the Jacobian over the "
-            "bounding box of Z is unbounded; use a smaller zonotope")
     G = Z.generators
+    mvt = np.isfinite(fp).all(axis=1) & np.isfinite(J).all(axis=(1, 2))  # (n,)
+    if not mvt.all():
+        # rows that may jump on the bounding box of Z (or whose Jacobian is unbounded):
+        # their interval hull, as independent box generators
+        hull = model.inclusion("natural")(Xb, Ub, Wb)[0]  # (n, 2)
+        if not np.isfinite(hull[~mvt]).all():
+            raise UnboundedSetError(
+                "evolve(): the interval enclosure of f over the bounding box of Z is "
+                f"unbounded in rows {np.flatnonzero(~mvt).tolist()} (where the mean-value "
+                "form is not available either); use a smaller zonotope")
+        fp = np.where(mvt[:, None], fp, hull)
+        J = np.where(mvt[:, None, None], J, 0.0)
     Mlo, Mhi = zn.imatmul(J[..., 0], J[..., 1], G, G)
     out = _family_to_zonotope(fp[:, 0], fp[:, 1], Mlo, Mhi)
     if max_order is not None:

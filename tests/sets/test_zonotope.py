@@ -107,7 +107,7 @@ def test_e4_vertices_match_brute_force_hull():
 def test_bisection_thm41_redundant_generators_overlap():
     """Fig 4.4: halves of the 2 x 6 zonotope overlap; their union is Z."""
     Z = cm.Zonotope(P_E4, H_E4)
-    L, R = Z.bisect()
+    L, R = Z.bisect(cover=False)
     # (4.12)-(4.13): the largest |h_ij| is 0.5855, in generator k = 2 (index 1)
     np.testing.assert_array_equal(L.center, P_E4 - H_E4[:, 1] / 2)
     np.testing.assert_array_equal(R.center, P_E4 + H_E4[:, 1] / 2)
@@ -125,14 +125,14 @@ def test_bisection_thm42_independent_generators_complete():
     """Fig 4.5: rank(H) = n, the halves share only a facet."""
     Z = cm.Zonotope(P_E4, H_E4_INDEPENDENT)
     assert Z.is_parallelotope()
-    L, R = Z.bisect()
+    L, R = Z.bisect(cover=False)
     aZ, aL, aR = _area(Z.vertices()), _area(L.vertices()), _area(R.vertices())
     inter = _area(_clip(L.vertices(), R.vertices()))
     assert inter == pytest.approx(0.0, abs=1e-12 * aZ)
     assert aL + aR == pytest.approx(aZ, rel=1e-12)
     # complete bisection of the redundant zonotope through its bounding parallelotope
     Zr = cm.Zonotope(P_E4, H_E4)
-    L2, R2 = Zr.bisect_complete()
+    L2, R2 = Zr.bisect_complete(cover=False)
     assert L2.n_generators == R2.n_generators == 2
     assert _area(_clip(L2.vertices(), R2.vertices())) == pytest.approx(0.0, abs=1e-9)
     pts = _sample(Zr, 3000, np.random.default_rng(0))
