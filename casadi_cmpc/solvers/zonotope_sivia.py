@@ -49,6 +49,7 @@ from ..exceptions import (
     UnboundedSetError,
 )
 from ..interval import arith as ia
+from ..interval._derivative import JacobianInclusion
 from ..interval.compiler import InclusionFunction, _discontinuous_ops
 from ..model import Model
 from ..sets import _zono_num as zn
@@ -624,9 +625,12 @@ class _Image:
     ``Mid[f(c, W)] ⊕ Mid[M] B^p ⊕ [-s, s]``,
     ``s = Rad[f(c, W)] + sum_j Rad[M]_{:j} + |[J]| r`` (sums rounded upward),
 
-    i.e. Kühn's diagonal generator matrix G of (4.15) written as a box. A Function whose
-    graph holds operations through which it may jump (floor, comparisons, ...) has no
-    mean-value form: then only the natural enclosure over ``□Z`` is used.
+    i.e. Kühn's diagonal generator matrix G of (4.15) written as a box. The mean-value form
+    of row ``k`` needs ``f_k`` continuous on ``□Z``: where an operation of ``f_k`` may jump
+    on ``□Z`` (floor, sign, comparisons, if_else, fmod, a pole ...; decided per zonotope from
+    interval enclosures of the operations' arguments) or its Jacobian is unbounded, row
+    ``k`` is the interval enclosure of ``f_k(□Z, W)`` instead (zero generator row, its
+    radius in ``s``).
     """
 
     def __init__(self, f: Any, n_x: int | None, W: Any, box_form: str | None) -> None:
@@ -683,16 +687,15 @@ class _Image:
         if self.discontinuous:
             warnings.warn(
                 f"'{name}' contains operations through which it may jump "
-                f"({', '.join(self.discontinuous)}); the mean-value form is not valid for it, "
-                "so the natural interval enclosure over the bounding box of each zonotope is "
-                "used instead", CmpcWarning, stacklevel=4)
-            box_form = box_form or "natural"
-        else:
-            jac = ca.densify(ca.jacobian(expr, x))
-            g = ca.Function(f"{name}_jac", syms, [jac, expr], {"live_variables": False})
-            self.jac = InclusionFunction(g, "natural", derived_outputs=(0,), evaluate=(0,))
-            self.point = InclusionFunction(fun, "centered" if self.W is not None else "natural")
+                f"({', '.join(self.discontinuous)}); the mean-value form is not valid on "
+                "zonotopes whose bounding box reaches a jump: there the natural interval "
+                "enclosure over the bounding box is used instead", CmpcWarning, stacklevel=4)
+        # interval Jacobian whose rows are [-inf, inf] on boxes where they may jump
+        self.jac = JacobianInclusion(fun, wrt=0)
+        point = "centered" if self.W is not None and not self.discontinuous else "natural"
+        self.point = InclusionFunction(fun, point)
         self.box = InclusionFunction(fun, box_form) if box_form else None
+        self._hull: InclusionFunction | None = self.box
 
     def __call__(self, fr: ZonotopeFrontier
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -706,21 +709,22 @@ class _Image:
         boxes = None
         if self.box is not None:
             boxes = self.box.evaluate_unchecked([Xb] + extra, N)[0]
-        m, n = self.m, self.n
-        if self.discontinuous:
-            c, rad = zn.midrad(boxes[..., 0], boxes[..., 1])
-            valid = np.isfinite(c).all(axis=1) & np.isfinite(rad).all(axis=1)
-            c = np.where(valid[:, None], c, 0.0)
-            rad = np.where(valid[:, None], rad, 0.0)
-            return c, np.zeros((N, m, 0)), rad, valid, boxes
         P = np.stack([C, C], axis=-1)
         fp = self.point.evaluate_unchecked([P] + extra, N)[0]  # (N, m, 2)
-        J = self.jac.evaluate_unchecked([Xb] + extra, N)[0]  # (N, m*n, 2), column-major
-        J = J.reshape(N, n, m, 2).transpose(0, 2, 1, 3)  # (N, m, n, 2)
-        valid = np.isfinite(fp).all(axis=(1, 2)) & np.isfinite(J).all(axis=(1, 2, 3))
+        J = self.jac([Xb] + extra, N)  # (N, m, n, 2); [-inf, inf] rows where f may jump
+        rows = np.isfinite(fp).all(axis=2) & np.isfinite(J).all(axis=(2, 3))  # (N, m)
+        if not rows.all():
+            # rows without a mean-value enclosure: the interval hull of f over the bounding
+            # box, as an independent box generator (zero generator row)
+            if self._hull is None:
+                self._hull = InclusionFunction(self.fun, "natural")
+            hull = boxes if boxes is not None else \
+                self._hull.evaluate_unchecked([Xb] + extra, N)[0]
+            fp = np.where(rows[..., None], fp, hull)
+            J = np.where(rows[..., None, None], J, 0.0)
+        valid = np.isfinite(fp).all(axis=(1, 2))
         if not valid.all():
             fp = np.where(valid[:, None, None], fp, 0.0)
-            J = np.where(valid[:, None, None, None], J, 0.0)
         Jlo, Jhi = J[..., 0], J[..., 1]
         Mlo, Mhi = zn.imatmul(Jlo, Jhi, H, H)  # (N, m, p)
         Mmid, Mrad = zn.midrad(Mlo, Mhi)

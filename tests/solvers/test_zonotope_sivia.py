@@ -160,7 +160,7 @@ def test_bisect_covers_parent_sampled():
         assert inside.all()
     # the halves are Thm 4.1's: half the split generator, centres c ∓ h_k / 2
     Z = fr[0]
-    L, R = Z.bisect()
+    L, R = Z.bisect(cover=False)
     assert np.allclose(halves[0].center, L.center) and np.allclose(halves[20].center, R.center)
     assert np.allclose(halves[0].generators[:, :2], L.generators)
 
