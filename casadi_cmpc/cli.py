@@ -37,7 +37,7 @@ def _run(name: str, out: str | None, samples: int, seed: int) -> int:
     print(model.summary())
     X = model.X.as_array()
     U = model.U.as_array()
-    W = model.W_box.as_array()
+    args = (X, U, model.W_box.as_array()) if model.l else (X, U)
     report: dict = {"example": name, "n": model.n, "m": model.m, "l": model.l}
     rng = np.random.default_rng(seed)
     xs = model.X.sample(samples, rng)
@@ -49,7 +49,7 @@ def _run(name: str, out: str | None, samples: int, seed: int) -> int:
     for kind in ("natural", "centered"):
         F = model.inclusion(kind)
         t0 = time.perf_counter()
-        Y = F(X, U, W)[0]
+        Y = F(*args)[0]
         dt = time.perf_counter() - t0
         inside = bool(((succ >= Y[:, 0]) & (succ <= Y[:, 1])).all())
         print(f"  {kind:9s} {_fmt_box(Y)}   (all samples inside: {inside})")

@@ -21,6 +21,15 @@ def test_run_default_example_checks_samples_and_writes_json(tmp_path, capsys):
         assert cl >= nl and ch <= nh
 
 
+@pytest.mark.parametrize("name", __import__("casadi_cmpc").models.names())
+def test_run_every_listed_example(name, tmp_path, capsys):
+    """Every example that ``cmpc list`` shows runs, and its enclosures hold the samples."""
+    assert main(["run", name, "--out", str(tmp_path), "--samples", "500"]) == 0
+    report = json.loads((tmp_path / "run.json").read_text())
+    assert report["example"] == name
+    assert report["natural"]["samples_inside"] and report["centered"]["samples_inside"]
+
+
 def test_run_unknown_example_fails_cleanly(capsys):
     assert main(["run", "no_such_model"]) == 2
     assert "no_such_model" in capsys.readouterr().err
