@@ -114,16 +114,36 @@ class SetBase(ABC):
     def save(self, path: str | Path) -> Path:
         """Save the set exactly to ``path`` (``.npz`` binary or ``.json`` text).
 
+        Parameters
+        ----------
+        path : str or Path
+            The file written, exactly this name; it must end in ``.npz`` or ``.json``.
+
         Returns
         -------
         pathlib.Path
-            The written file.
+            The written file (``path`` itself).
+
+        Raises
+        ------
+        ValueError
+            ``path`` does not end in ``.npz`` or ``.json``.
         """
         return _save_state(self._type_name, self._state(), Path(path))
 
     @classmethod
     def load(cls, path: str | Path) -> SetBase:
-        """Load a set saved with :meth:`save`; the file must hold this type (or a subclass)."""
+        """Load a set saved with :meth:`save`; the file must hold this type (or a subclass).
+
+        Raises
+        ------
+        ValueError
+            Wrong suffix, or the file is not a set file written by :meth:`save`.
+        FileNotFoundError
+            No file at ``path``.
+        TypeError
+            The file holds another set type.
+        """
         obj = load_set(path)
         if not isinstance(obj, cls):
             raise TypeError(f"{path} holds a {type(obj).__name__}, not a {cls.__name__}")
@@ -155,21 +175,32 @@ def _decode(v: Any) -> Any:
     return v
 
 
+_SUFFIXES = (".npz", ".json")
+
+
+def _check_suffix(path: Path, action: str) -> None:
+    if path.suffix.lower() not in _SUFFIXES:
+        raise ValueError(
+            f"cannot {action} '{path}': the file name must end in '.npz' (binary) or "
+            f"'.json' (text); got the suffix {path.suffix or '(none)'!r}. Rename it, "
+            f"e.g. '{path.with_suffix('.npz')}'")
+
+
 def _save_state(type_name: str, state: dict[str, Any], path: Path) -> Path:
+    _check_suffix(path, "save a set to")
     path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".json":
+    if path.suffix.lower() == ".json":
         doc = {"type": type_name, "format": _FORMAT_VERSION,
                "state": {k: _encode(v) for k, v in state.items()}}
         path.write_text(json.dumps(doc))  # float repr round-trips exactly; inf -> Infinity
         return path
-    if path.suffix != ".npz":
-        path = path.with_suffix(path.suffix + ".npz") if path.suffix else path.with_suffix(
-            ".npz")
     meta = {"type": type_name, "format": _FORMAT_VERSION,
             "state": {k: _encode(v) for k, v in state.items()
                       if not isinstance(v, np.ndarray)}}
     arrays = {f"a_{k}": v for k, v in state.items() if isinstance(v, np.ndarray)}
-    np.savez(path, __meta__=np.array(json.dumps(meta)), **arrays)
+    # write through a file object: np.savez would append '.npz' to a name without it
+    with open(path, "wb") as fh:
+        np.savez(fh, __meta__=np.array(json.dumps(meta)), **arrays)
     return path
 
 
@@ -184,18 +215,41 @@ def load_set(path: str | Path) -> SetBase:
     Returns
     -------
     The set, of the type that was saved.
+
+    Raises
+    ------
+    ValueError
+        ``path`` does not end in ``.npz`` or ``.json``, or is not a set file written by
+        ``save`` (the message names the file and the expected format).
+    FileNotFoundError
+        No file at ``path``.
     """
     path = Path(path)
-    if path.suffix == ".json":
-        doc = json.loads(path.read_text())
-        state = {k: _decode(v) for k, v in doc["state"].items()}
-    else:
-        with np.load(path, allow_pickle=False) as data:
-            doc = json.loads(str(data["__meta__"]))
+    _check_suffix(path, "load a set from")
+    if not path.is_file():
+        raise FileNotFoundError(f"no set file at '{path}'")
+    bad = (f"'{path}' is not a set file written by save(): expected "
+           + ("a JSON document with the keys 'type' and 'state'"
+              if path.suffix.lower() == ".json" else
+              "an .npz archive (numpy.savez) with a '__meta__' entry"))
+    try:
+        if path.suffix.lower() == ".json":
+            doc = json.loads(path.read_text())
             state = {k: _decode(v) for k, v in doc["state"].items()}
-            for key in data.files:
-                if key.startswith("a_"):
-                    state[key[2:]] = np.array(data[key])
+        else:
+            with np.load(path, allow_pickle=False) as data:
+                if not hasattr(data, "files") or "__meta__" not in data.files:
+                    raise ValueError("no '__meta__' entry")
+                doc = json.loads(str(data["__meta__"]))
+                state = {k: _decode(v) for k, v in doc["state"].items()}
+                for key in data.files:
+                    if key.startswith("a_"):
+                        state[key[2:]] = np.array(data[key])
+    except (ValueError, KeyError, TypeError, AttributeError, OSError, EOFError,
+            UnicodeDecodeError) as exc:
+        raise ValueError(f"{bad} ({type(exc).__name__}: {exc})") from exc
+    if not isinstance(doc, dict):
+        raise ValueError(bad)
     cls = _TYPES.get(doc.get("type", ""))
     if cls is None:
         raise ValueError(f"{path} does not hold a known set type (found {doc.get('type')!r})")

@@ -97,3 +97,35 @@ def test_plot_draws_something(S):
     ax = S.plot()
     assert len(ax.patches) + len(ax.collections) + len(ax.lines) > 0
     plt.close("all")
+
+
+def test_save_writes_exactly_the_given_name_or_refuses(S, tmp_path):
+    for name in ("s.npz", "s.json", "S.NPZ"):
+        path = S.save(tmp_path / name)
+        assert path == tmp_path / name and path.is_file()
+        assert type(S).load(path).dim == S.dim
+    for name in ("box.txt", "box", "box.npz.bak"):
+        with pytest.raises(ValueError, match=r"\.npz.*\.json"):
+            S.save(tmp_path / name)
+        assert not any(p.name.startswith(name) for p in tmp_path.iterdir())
+
+
+def test_load_names_the_file_and_the_expected_format(S, tmp_path):
+    txt = tmp_path / "notes.txt"
+    txt.write_text("1 2 3\n")
+    with pytest.raises(ValueError, match=r"notes\.txt.*\.npz"):
+        type(S).load(txt)
+    fake = tmp_path / "fake.npz"
+    fake.write_text("1 2 3\n")
+    with pytest.raises(ValueError, match=r"fake\.npz.*not a set file.*npz archive"):
+        type(S).load(fake)
+    other = tmp_path / "other.npz"
+    np.savez(other, x=np.zeros(3))
+    with pytest.raises(ValueError, match=r"other\.npz.*__meta__"):
+        type(S).load(other)
+    bad_json = tmp_path / "bad.json"
+    bad_json.write_text("[1, 2")
+    with pytest.raises(ValueError, match=r"bad\.json.*JSON document"):
+        type(S).load(bad_json)
+    with pytest.raises(FileNotFoundError, match="missing.npz"):
+        type(S).load(tmp_path / "missing.npz")
