@@ -1,13 +1,20 @@
-"""Convex hulls of points (Qhull) and double-description conversions (pycddlib).
+"""Convex hulls of points and double-description conversions.
 
-All conversions work in floating point: ``pycddlib-standalone`` ships the float
-arithmetic of cddlib only (no GMP rationals).  Every H-representation built here has its
-right-hand sides recomputed from the input points (``b_k = max_i a_k.p_i``), so the hull
-contains every input point up to the rounding of that evaluation, whatever the rounding
-inside Qhull or cddlib.
+Backends: pycddlib (``pip install casadi_cmpc[cdd]``; the ``cdd`` module, imported only
+when first needed, see :func:`_cdd`) when it is importable, otherwise scipy's Qhull
+(``ConvexHull``, ``HalfspaceIntersection``) and LPs.  Both give the same sets up to the
+outward tolerances documented in :mod:`casadi_cmpc.sets.polytope`.
+
+All conversions work in floating point (``pycddlib-standalone`` ships the float arithmetic
+of cddlib only).  Every H-representation of a hull built here has its right-hand sides
+recomputed from the input points and rounded upward (``b_k >= max_i a_k.p_i`` exactly),
+so the hull contains every input point exactly.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from types import ModuleType
 
 import numpy as np
 
@@ -15,13 +22,59 @@ from ..exceptions import EmptySetError, SolverError, UnboundedSetError
 
 __all__: list[str] = []
 
-#: Relative tolerance for the numerical rank of a point cloud (affine hull detection).
-RANK_RTOL = 1e-10
+#: Relative tolerance for the numerical rank of a point cloud, relative to its spread
+#: (largest singular value of the differences): translation and scale invariant.
+RANK_RTOL = 1e-12
+_U = 2.0 ** -53
+
+
+def _cdd() -> ModuleType | None:
+    """The ``cdd`` module (pycddlib) when importable, else None (scipy/LP fallback)."""
+    try:
+        import cdd
+    except ImportError:
+        return None
+    return cdd
+
+
+def dot_upper(P: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """Right-hand sides ``b_k >= max_i A_k . P_i`` holding exactly (not only in floats).
+
+    ``b_k`` is the floating-point maximum when it is exact enough (checked for every
+    point within the rounding bound of the maximum by error-free products and a
+    correctly rounded sum), else that maximum plus a rigorous bound of its rounding
+    error.
+
+    Parameters
+    ----------
+    P : ndarray, shape (N, n)
+    A : ndarray, shape (k, n)
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    from ._boxkernel import exact_dot_le
+
+    n = P.shape[1]
+    val = P @ A.T  # (N, k)
+    err = (np.abs(P) @ np.abs(A).T) * (2 * (n + 2) * _U) + 1e-300
+    b = val.max(axis=0)
+    ii, kk = np.nonzero(val + err > b)
+    if ii.size:
+        ok = exact_dot_le(P[ii], A[kk], b[kk])
+        bad = np.unique(kk[~ok])
+        if bad.size:
+            b[bad] = np.nextafter((val[:, bad] + err[:, bad]).max(axis=0), np.inf)
+    return b
 
 
 def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Affine hull of points.
+
+    The rank is read from the singular values of the differences ``p_i - mean``
+    relative to the largest one (translation and scale invariant): ``s_k > rtol s_1``.
 
     Parameters
     ----------
@@ -40,11 +93,10 @@ def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL
     n = P.shape[1]
     origin = P.mean(axis=0)
     D = P - origin
-    scale = max(float(np.abs(P).max(initial=0.0)), 1e-300)
-    if P.shape[0] <= 1 or float(np.abs(D).max(initial=0.0)) <= rtol * scale:
+    if P.shape[0] <= 1 or not np.any(P != P[0]):
         return origin, np.zeros((n, 0)), np.eye(n)
     _, s, Vt = np.linalg.svd(D, full_matrices=True)
-    r = int(np.sum(s > rtol * max(scale * np.sqrt(P.shape[0]), s[0])))
+    r = max(1, int(np.sum(s > rtol * s[0])))
     return origin, Vt[:r].T.copy(), Vt[r:].T.copy()
 
 
@@ -60,6 +112,7 @@ def _qhull(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Facet normals (unit, outward) and hull vertex indices of full-dimensional points Z."""
     from scipy.spatial import ConvexHull, QhullError
 
+    Z = Z / max(float(np.abs(Z).max()), 1e-300)
     try:
         h = ConvexHull(Z)
     except QhullError:
@@ -72,8 +125,45 @@ def _qhull(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _merge_rows(normals), np.asarray(h.vertices, dtype=np.int64)
 
 
+def _polygon_normals(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit outward edge normals of the convex hull of 2-D points, and its vertices.
+
+    Each normal is computed from the two end points of its edge as ``(dy, -dx)`` and
+    normalised: two polygons sharing an edge get exactly opposite rows (floating-point
+    subtraction and the norm are symmetric), so they tile the plane along the edge
+    without a rounding-level gap.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    Z = P - P.mean(axis=0)  # the combinatorics only: translation and scale invariant
+    Z = Z / max(float(np.abs(Z).max()), 1e-300)
+    try:
+        h = ConvexHull(Z)
+    except QhullError:
+        try:
+            h = ConvexHull(Z, qhull_options="QJ")
+        except QhullError as exc:  # pragma: no cover - full rank checked before
+            raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
+    c = P[h.vertices].mean(axis=0)
+    rows = []
+    for i, j in h.simplices:
+        p, q = P[i], P[j]
+        nrm = np.array([q[1] - p[1], p[0] - q[0]])
+        if np.dot(nrm, c - p) > 0:
+            nrm = -nrm
+        rows.append(nrm / np.hypot(nrm[0], nrm[1]))
+    A = np.unique(np.array(rows), axis=0)
+    return A, np.asarray(h.vertices, dtype=np.int64)
+
+
 def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """H-representation of the convex hull of points.
+
+    The affine dimension ``r`` is the numerical rank of the differences (see
+    :func:`affine_hull`). A hull found flat (``r < n``) gets the pairs of rows ``±v`` of
+    the normals of its affine hull; when the points are flat only up to the rank
+    tolerance, these pairs are a slab as thick as the points (an outer description), and
+    every input point that is extreme in the flat hull is returned as a vertex.
 
     Parameters
     ----------
@@ -85,7 +175,7 @@ def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         Unit facet normals; for a hull of dimension ``r < n`` also the pairs ``±v`` of
         the normals ``v`` of its affine hull.
     b : ndarray, shape (k,)
-        ``b_k = max_i A_k . points_i``.
+        ``b_k >= max_i A_k . points_i`` (rounded upward: every point is inside exactly).
     vertices : ndarray, shape (v, n)
         The extreme points among ``points``.
     """
@@ -95,9 +185,15 @@ def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r = U.shape[1]
     if r == 0:
         A = np.vstack([np.eye(n), -np.eye(n)])
-        return A, (P @ A.T).max(axis=0), P[:1].copy()
+        return A, dot_upper(P, A), P[:1].copy()
     Z = (P - origin) @ U
-    if r == 1:
+    if r == n == 2:
+        A, vidx = _polygon_normals(P)
+        return A, dot_upper(P, A), P[np.sort(vidx)]
+    if r == n:  # full-dimensional: no rotation (keeps axis-aligned facets exact)
+        U = np.eye(n)
+        A_sub, vidx = _qhull(P - origin)
+    elif r == 1:
         z = Z[:, 0]
         A_sub = np.array([[1.0], [-1.0]])
         vidx = np.unique([int(np.argmax(z)), int(np.argmin(z))])
@@ -107,15 +203,113 @@ def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if Nc.shape[1]:
         A = np.vstack([A, Nc.T, -Nc.T])
     A = A / np.linalg.norm(A, axis=1, keepdims=True)
-    b = (P @ A.T).max(axis=0)
-    return A, b, P[np.sort(vidx)]
+    # exact axis directions stay exact (their rows then describe the flat exactly)
+    A = np.where(np.abs(A) < 1e-15, 0.0, A)
+    A = A / np.linalg.norm(A, axis=1, keepdims=True)
+    return A, dot_upper(P, A), P[np.sort(vidx)]
+
+
+def halfspace_vertices(A: np.ndarray, b: np.ndarray, interior: np.ndarray) -> np.ndarray:
+    """Vertices of the bounded full-dimensional ``{A x <= b}`` by scipy's Qhull.
+
+    Parameters
+    ----------
+    A : ndarray, shape (m, n), unit rows
+    b : ndarray, shape (m,)
+    interior : ndarray, shape (n,)
+        A point strictly inside (e.g. the Chebyshev centre).
+
+    Returns
+    -------
+    ndarray, shape (k, n)
+        The extreme points of the intersection.
+    """
+    from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
+
+    c = np.asarray(interior, dtype=float)
+    bs = b - A @ c
+    scale = float(np.abs(bs).max(initial=0.0)) or 1.0
+    hs = np.hstack([A, -(bs / scale)[:, None]])
+    try:
+        pts = HalfspaceIntersection(hs, np.zeros(A.shape[1])).intersections
+    except (QhullError, ValueError) as exc:
+        raise SolverError(f"Qhull could not intersect the half-spaces: {exc}") from exc
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if pts.shape[0] > A.shape[1] + 1 and A.shape[1] > 1:
+        try:
+            pts = pts[np.sort(ConvexHull(pts).vertices)]
+        except QhullError:
+            pass
+    return pts * scale + c
+
+
+def fm_eliminate(A: np.ndarray, b: np.ndarray, keep: list[int],
+                 prune: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Project ``{A x <= b}`` onto the coordinates ``keep`` by Fourier–Motzkin elimination.
+
+    Each eliminated variable combines every row with a positive coefficient with every
+    row with a negative one; ``prune(A, b)`` removes redundant rows after each step.
+    Exact in exact arithmetic; in floating point each combined right-hand side is rounded
+    upward (the projection can only grow by rounding).
+
+    Returns
+    -------
+    A_out : ndarray, shape (k, len(keep))
+    b_out : ndarray, shape (k,)
+        In the order of ``keep``.
+    """
+    n = A.shape[1]
+    drop = [j for j in range(n) if j not in keep]
+    cols = list(range(n))
+    for j in drop:
+        c = cols.index(j)
+        pos = np.flatnonzero(A[:, c] > 0)
+        neg = np.flatnonzero(A[:, c] < 0)
+        zer = np.flatnonzero(A[:, c] == 0)
+        rows = [A[zer]]
+        rhs = [b[zer]]
+        if pos.size and neg.size:
+            lp_ = -A[neg, c][None, :]  # (1, q) > 0
+            la = A[pos, c][:, None]  # (p, 1) > 0
+            comb = (lp_[..., None] * A[pos][:, None, :] + la[..., None] * A[neg][None])
+            comb = comb.reshape(-1, A.shape[1])
+            cb = (lp_ * b[pos][:, None] + la * b[neg][None]).ravel()
+            err = (np.abs(lp_ * b[pos][:, None]) + np.abs(la * b[neg][None])).ravel()
+            cb = np.nextafter(cb + 4 * _U * err, np.inf)
+            comb[:, c] = 0.0
+            nrm = np.abs(comb).max(axis=1)
+            ok = nrm > 0
+            cb = np.where(ok, cb / np.where(ok, nrm, 1.0), cb)
+            cb = np.nextafter(cb, np.inf)
+            comb = np.where(ok[:, None], comb / np.where(ok, nrm, 1.0)[:, None], comb)
+            rows.append(comb)
+            rhs.append(cb)
+        A = np.delete(np.vstack(rows), c, axis=1)
+        b = np.concatenate(rhs)
+        cols.pop(c)
+        zero = ~np.any(A != 0.0, axis=1)
+        if np.any(b[zero] < 0.0):
+            return np.zeros((1, len(keep))), np.array([-1.0])
+        A, b = A[~zero], b[~zero]
+        if A.shape[0] > 1:
+            A, b = prune(A, b)
+    order = [cols.index(j) for j in keep]
+    return A[:, order], b
 
 
 def _cdd_matrix(A: np.ndarray, b: np.ndarray):
-    import cdd
+    cdd = _require_cdd()
 
     arr = np.hstack([b[:, None], -A])
     return cdd.matrix_from_array(arr, rep_type=cdd.RepType.INEQUALITY)
+
+
+def _require_cdd() -> ModuleType:
+    cdd = _cdd()
+    if cdd is None:
+        raise SolverError("pycddlib is not installed (pip install 'casadi_cmpc[cdd]')")
+    return cdd
 
 
 def cdd_vertices(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -128,8 +322,7 @@ def cdd_vertices(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     UnboundedSetError
         cddlib finds a ray or a line.
     """
-    import cdd
-
+    cdd = _require_cdd()
     mat = _cdd_matrix(A, b)
     try:
         gen = cdd.copy_generators(cdd.polyhedron_from_matrix(mat))
@@ -150,8 +343,7 @@ def cdd_eliminate(A: np.ndarray, b: np.ndarray, keep: list[int]
     Returns the H-representation ``(A', b')`` of the projection (redundant rows removed,
     implicit equalities as pairs of inequalities) in the order of ``keep``.
     """
-    import cdd
-
+    cdd = _require_cdd()
     n = A.shape[1]
     drop = [j for j in range(n) if j not in keep]
     mat = _cdd_matrix(A, b)
