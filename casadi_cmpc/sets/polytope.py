@@ -22,7 +22,9 @@ Numerics
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Iterable, Iterator, Sequence
+from fractions import Fraction
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -49,14 +51,21 @@ _MAX_VERTEX_SUMS = 200_000
 
 
 class _Rows(NamedTuple):
-    """The rows of a polytope that constrain anything, raw and normalised."""
+    """The rows of a polytope that constrain anything, raw and normalised.
+
+    LPs run in the coordinates ``z = (x - c0) / s`` (``An z <= bz``): translating or
+    scaling the polytope translates/scales ``c0`` and ``s`` and leaves the LP unchanged.
+    """
 
     A: np.ndarray  # (k, n) raw finite rows with finite b and a != 0
     b: np.ndarray
     An: np.ndarray  # rows scaled to unit 2-norm
     bn: np.ndarray
     empty: bool  # trivially empty (a row 0.x <= b < 0 or b = -inf)
-    tol: float  # LP decision tolerance
+    tol: float  # heuristic tolerance RTOL * s (a distance in the units of x)
+    c0: np.ndarray  # (n,) reference point
+    s: float  # scale > 0
+    bz: np.ndarray  # (bn - An c0) / s
 
 
 def _gamma(k: int) -> float:
@@ -276,8 +285,22 @@ class Polytope(SetBase):
         A_k, b_k, nk = A[keep], b[keep], norms[keep]
         An = A_k / nk[:, None]
         bn = b_k / nk
-        scale = max(1.0, float(np.abs(bn).max(initial=0.0)))
-        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale)
+        n = A.shape[1]
+        if "vertices" in self._cache and len(self._cache["vertices"]):
+            c0 = np.asarray(self._cache["vertices"], dtype=float).mean(axis=0)
+        elif An.shape[0]:
+            c0 = np.linalg.lstsq(An, bn, rcond=None)[0]
+        else:
+            c0 = np.zeros(n)
+        if not np.isfinite(c0).all():
+            c0 = np.zeros(n)
+        with np.errstate(over="ignore", invalid="ignore"):
+            dev = np.abs(bn - An @ c0)
+            scale = float(dev.max(initial=0.0))
+        if not np.isfinite(scale) or scale <= 0.0:
+            scale = 1.0
+        bz = (bn - An @ c0) / scale
+        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz)
         self._cache["rows"] = r
         return r
 
@@ -320,25 +343,36 @@ class Polytope(SetBase):
         elif R.An.shape[0] == 0:
             c = (np.zeros(n), np.inf)
         else:
-            cap = 1e6 * R.tol / RTOL
+            cap = 1e6  # in the scaled coordinates z
             rows = np.hstack([R.An, np.ones((R.An.shape[0], 1))])
             cost = np.zeros(n + 1)
             cost[-1] = -1.0
             ub = np.full(n + 1, np.inf)
             ub[-1] = cap
-            st, x, f, _ = _lp.lp(cost, rows, R.bn, -np.inf, ub)
-            _lp.check_status(st, "the Chebyshev ball")
+            st, x, f, y = _lp.lp(cost, rows, R.bz, -np.inf, ub)
+            if st == _lp.INFEASIBLE:  # HiGHS proved r <= cap infeasible: cannot happen
+                st = _lp.NUMERICAL  # pragma: no cover
+            if st != _lp.OPTIMAL:
+                # numerical trouble: nothing is claimed (not proven empty)
+                c = (R.c0.copy(), 0.0)
+                self._cache["cheb"] = c
+                self._cache["cheb_y"] = None
+                return c
             r = float(x[-1])
-            c = (x[:n].copy(), np.inf if r >= cap * (1 - 1e-9) else r)
+            c = (R.c0 + R.s * x[:n], np.inf if r >= cap * (1 - 1e-9) else r * R.s)
+            self._cache["cheb_y"] = y
         self._cache["cheb"] = c
         return c
 
     def is_empty(self) -> bool:
-        """True when the polytope is empty.
+        """True only when the polytope is proven empty.
 
-        Decided by the Chebyshev LP ``max r s.t. a_i.x + r ||a_i|| <= b_i``: empty when
-        the optimum is ``< -tol`` (see the module notes), or when a row reads
-        ``0.x <= b < 0`` or ``b = -inf``.
+        A row ``0.x <= b < 0`` or ``b = -inf`` proves it at once. Otherwise the Chebyshev
+        LP ``max r s.t. a_i.x + r ||a_i|| <= b_i`` (scaled coordinates) is solved; when its
+        optimum is negative, its multipliers point at an infeasible subsystem, for which
+        a Farkas certificate ``y >= 0, A^T y = 0, b.y < 0`` is computed and checked in
+        exact rational arithmetic on the stored rows. ``False`` means "not proven empty"
+        (a set that is empty only by rounding-level amounts may answer ``False``).
 
         Returns
         -------
@@ -346,7 +380,18 @@ class Polytope(SetBase):
         """
         e = self._cache.get("empty")
         if e is None:
-            e = self._cache["empty"] = bool(self._chebyshev()[1] < -self._rows().tol)
+            R = self._rows()
+            if R.empty:
+                e = True
+            elif R.An.shape[0] == 0:
+                e = False
+            else:
+                r = self._chebyshev()[1]
+                y = self._cache.get("cheb_y")
+                e = bool(r < 0.0 and y is not None
+                         and _farkas_empty(R.A, R.b, np.asarray(y) / np.linalg.norm(
+                             R.A, axis=1)))
+            self._cache["empty"] = e
         return e
 
     def is_full_dimensional(self) -> bool:
@@ -419,17 +464,76 @@ class Polytope(SetBase):
                 "(intersect it with a Box first)")
 
     def _max_lp(self, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``max d.x`` over the polytope for each row of D (K, n): values and maximisers."""
+        """``max d.x`` over the polytope for each row of D (K, n): values and maximisers.
+
+        Solved in the scaled coordinates ``z`` of :class:`_Rows` (translation and scale
+        invariant); the LP multipliers of the unit rows are kept in ``self._last_y``.
+        """
         R = self._rows()
         K, n = D.shape
         m = R.An.shape[0]
-        res = _lp.block_lp(-D, np.tile(R.An, (K, 1)), np.tile(R.bn, K),
+        res = _lp.block_lp(-D, np.tile(R.An, (K, 1)), np.tile(R.bz, K),
                            np.repeat(np.arange(K), m))
         _lp.check_status(res.status, "a support function")
-        vals = -res.fun
+        vals = -res.fun * R.s + D @ R.c0
         vals[res.status == _lp.UNBOUNDED] = np.inf
         vals[res.status == _lp.INFEASIBLE] = -np.inf
-        return vals, res.x
+        X = R.c0 + R.s * res.x
+        self._last_y = res.y.reshape(K, m) if m else np.zeros((K, 0))
+        return vals, X
+
+    def _support_upper(self, D: np.ndarray) -> np.ndarray:
+        """Rigorous upper bounds of ``h(d) = max_{x in P} d.x`` for a bounded non-empty P.
+
+        From LP multipliers ``y >= 0`` of the raw rows: ``d.x = y^T A x + rho.x <=
+        y.b + rho.x`` with ``rho = d - A^T y``; ``rho.x`` is bounded on the box
+        ``|x - c0| <= W`` around the reference point, and W itself comes from the same
+        bound in the axis directions (``W <= B + |R| W`` solved with ``||R|| < 1``).
+        All sums are evaluated in exact rational arithmetic and rounded upward.
+
+        Parameters
+        ----------
+        D : ndarray, shape (K, n)
+
+        Returns
+        -------
+        ndarray, shape (K,)
+            ``+inf`` where no bound could be established.
+        """
+        R = self._rows()
+        K, n = D.shape
+        E = np.vstack([np.eye(n), -np.eye(n)])
+        self._max_lp(np.vstack([E, D]))
+        Y = np.asarray(self._last_y, dtype=float)
+        norms = np.linalg.norm(R.A, axis=1)
+        Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0) / norms
+        A = [[Fraction(float(v)) for v in row] for row in R.A]
+        b = [Fraction(float(v)) for v in R.b]
+        c0 = [Fraction(float(v)) for v in R.c0]
+        DD = np.vstack([E, D])
+        beta: list[Fraction] = []
+        rho: list[list[Fraction]] = []
+        for k in range(DD.shape[0]):
+            y = [Fraction(float(v)) for v in Y[k]]
+            idx = [i for i, v in enumerate(y) if v != 0]
+            g = [sum((y[i] * A[i][j] for i in idx), Fraction(0)) for j in range(n)]
+            r_k = [Fraction(float(DD[k, j])) - g[j] for j in range(n)]
+            beta.append(sum((y[i] * b[i] for i in idx), Fraction(0))
+                        + sum((r_k[j] * c0[j] for j in range(n)), Fraction(0)))
+            rho.append([abs(v) for v in r_k])
+        # W_j >= max |x_j - c0_j|:  W <= B + Rm W
+        B = [max(beta[j] - c0[j], beta[n + j] + c0[j]) for j in range(n)]
+        q = max(sum(max(rho[j][i], rho[n + j][i]) for i in range(n)) for j in range(n))
+        out = np.full(K, np.inf)
+        if q >= Fraction(1, 2):
+            return out
+        Bmax = max(max(B), Fraction(0))
+        W = [max(Bj, Fraction(0)) + q * Bmax / (1 - q) for Bj in B]
+        for k in range(K):
+            kk = 2 * n + k
+            val = beta[kk] + sum((rho[kk][j] * W[j] for j in range(n)), Fraction(0))
+            out[k] = _frac_up(val)
+        return out
 
     def support(self, directions: Any) -> np.ndarray | float:
         """Support function ``h(d) = max_{x in P} d.x``.
@@ -464,8 +568,9 @@ class Polytope(SetBase):
     def bounding_box(self) -> Box:
         """Smallest box containing the polytope (infinite bounds where unbounded).
 
-        The support values are widened outward by ``1e-12 |v| + 4 ulp`` as a guard for
-        the rounding of the solver.
+        For a bounded polytope the bounds are rigorous: LP multipliers turned into upper
+        bounds of the support function evaluated in exact rational arithmetic
+        (:meth:`_support_upper`). Unbounded directions give infinite bounds.
 
         Returns
         -------
@@ -479,22 +584,37 @@ class Polytope(SetBase):
         if self.is_empty():
             raise EmptySetError("an empty polytope has no bounding box")
         n = self.dim
-        h = np.asarray(self.support(np.vstack([np.eye(n), -np.eye(n)])))
+        E = np.vstack([np.eye(n), -np.eye(n)])
+        if self.is_bounded() and self._rows().An.shape[0]:
+            h = self._support_upper(E)
+            if "vertices" in self._cache:  # from_vertices: the H-rep contains the points
+                hv = np.asarray(self.support(E))
+                with np.errstate(invalid="ignore"):
+                    hv = hv + (1e-12 * np.abs(hv) + 4 * np.abs(np.spacing(hv)))
+                h = np.where(np.isfinite(h), h, hv)
+        else:
+            h = np.asarray(self.support(E), dtype=float)
+            with np.errstate(invalid="ignore"):
+                h = h + (1e-12 * np.abs(h) + 4 * np.abs(np.spacing(h)))
         hi, lo = h[:n], -h[n:]
-        with np.errstate(invalid="ignore"):
-            hi = hi + (1e-12 * np.abs(hi) + 4 * np.abs(np.spacing(hi)))
-            lo = lo - (1e-12 * np.abs(lo) + 4 * np.abs(np.spacing(lo)))
         hi = np.where(np.isnan(hi), np.inf, hi)
         lo = np.where(np.isnan(lo), -np.inf, lo)
         return Box(np.minimum(lo, hi), hi)
 
     def vertices(self) -> np.ndarray:
-        """Vertices of the bounded polytope (cddlib double description, float).
+        """Vertices of the bounded polytope.
+
+        With pycddlib: cddlib's double description (float) in the scaled coordinates;
+        without: Qhull's half-space intersection, or LPs for a polytope without interior.
+        Floating-point results: each vertex satisfies ``A v <= b`` up to ``100 tol``
+        (``tol = 1e-9`` times the scale of the polytope) and vertices closer than ``tol``
+        are merged; polytopes built by :meth:`from_vertices` return their input extreme
+        points exactly.
 
         Returns
         -------
         ndarray, shape (k, n)
-            The extreme points, each checked to satisfy ``A v <= b`` up to ``tol``.
+            The extreme points.
 
         Raises
         ------
@@ -508,9 +628,14 @@ class Polytope(SetBase):
             return V.copy()
         self._require_bounded_nonempty("the vertex list")
         R = self._rows()
-        V = _hull.cdd_vertices(R.An, R.bn)
+        if _hull._cdd() is not None:
+            V = R.c0 + R.s * _hull.cdd_vertices(R.An, R.bz)
+        else:
+            V = self._vertices_fallback()
         V = _dedupe(V, R.tol)
-        viol = (V @ R.An.T - R.bn).max(initial=-np.inf)
+        res = V @ R.An.T - R.bn
+        rnd = 16 * _U * (np.abs(V) @ np.abs(R.An).T + np.abs(R.bn))
+        viol = (res - rnd).max(initial=-np.inf)
         if viol > 100 * R.tol:
             raise SolverError(
                 f"vertex enumeration is inaccurate (a vertex violates a row by {viol:.3g}); "
@@ -518,6 +643,17 @@ class Polytope(SetBase):
         V.setflags(write=False)
         self._cache["vertices"] = V
         return V.copy()
+
+    def _vertices_fallback(self) -> np.ndarray:
+        """Vertices without pycddlib: Qhull's half-space intersection around the
+        Chebyshev centre (full-dimensional P), else the support-LP hull of
+        :meth:`_project_support` in the affine hull of P."""
+        R = self._rows()
+        c, r = self._chebyshev()
+        if np.isfinite(r) and r > 1e-7 * R.s and self.dim > 1:
+            return _hull.halfspace_vertices(R.An, R.bn, c)
+        Q = self._project_support(list(range(self.dim)))
+        return np.array(Q._cache["vertices"])
 
     def volume(self) -> float:
         """Lebesgue measure (Qhull triangulation of the vertices; 0 without interior).
@@ -577,13 +713,13 @@ class Polytope(SetBase):
         2. for a bounded full-dimensional P with ``n <= 3`` (together with stage 1, in one
            closed-form pass): the complete set of separating directions, i.e. the facet
            normals of the projections of P on every proper subset of coordinates (facets
-           of ``P ⊕ box`` have such normals); separated with margin ``tol`` -> ``False``,
+           of ``P ⊕ box`` have such normals), with rigorous offsets -> ``False``,
            otherwise ``True``; on the line stage 1 alone is complete;
         3. otherwise, a point of the box (its centre, the point of the box nearest to the
            Chebyshev centre) lies in P -> ``True``;
         4. the rest: one LP per box (stacked into block LPs): ``max r`` s.t.
-           ``a_i.x + r <= b_i`` (unit rows), ``x`` in the box. ``r >= -tol`` -> ``True``;
-           else the LP multipliers ``y >= 0`` give the implied inequality
+           ``a_i.x + r <= b_i`` (unit rows, scaled coordinates), ``x`` in the box.
+           ``r >= 0`` -> ``True``; else the LP multipliers ``y >= 0`` give the implied inequality
            ``y^T A x <= y^T b``, which is checked to separate the box with a rigorous
            rounding bound -> ``False`` (``True`` if the check fails).
 
@@ -633,8 +769,8 @@ class Polytope(SetBase):
         For a bounded full-dimensional P the facet normals of ``P ⊕ box`` are facet
         normals of P or (lifted) facet normals of the projections of P on proper subsets
         of the coordinates, whatever the box; so a box misses P iff one of these rows
-        separates it. The offsets of the projections come from LPs and are used with the
-        margin ``tol``.
+        separates it. The offsets of the lifted rows are rigorous upper bounds of the
+        support function (:meth:`_support_upper`), so a separation is a proof.
         """
         if "sat" in self._cache:
             return self._cache["sat"]
@@ -650,8 +786,10 @@ class Polytope(SetBase):
                     QR = Q._rows()
                     lifted = np.zeros((QR.A.shape[0], n))
                     lifted[:, list(T)] = QR.A
-                    rows.append(lifted)
-                    rhs.append(QR.b + R.tol)
+                    h = self._support_upper(lifted)
+                    ok = np.isfinite(h)
+                    rows.append(lifted[ok])
+                    rhs.append(h[ok])
             sat = BoxKernel(np.vstack(rows), np.concatenate(rhs))
         self._cache["sat"] = sat
         return sat
@@ -664,12 +802,15 @@ class Polytope(SetBase):
         rows = np.hstack([R.An, np.ones((m, 1))])
         C = np.zeros((K, n + 1))
         C[:, -1] = -1.0
-        lb = np.hstack([bx[..., 0], np.full((K, 1), -np.inf)])
-        ub = np.hstack([bx[..., 1], np.zeros((K, 1))])
-        res = _lp.block_lp(C, np.tile(rows, (K, 1)), np.tile(R.bn, K),
+        with np.errstate(invalid="ignore", over="ignore"):
+            zlo = (bx[..., 0] - R.c0) / R.s
+            zhi = (bx[..., 1] - R.c0) / R.s
+        lb = np.hstack([zlo, np.full((K, 1), -np.inf)])
+        ub = np.hstack([zhi, np.zeros((K, 1))])
+        res = _lp.block_lp(C, np.tile(rows, (K, 1)), np.tile(R.bz, K),
                            np.repeat(np.arange(K), m), lb, ub)
         r = res.x[:, -1]
-        cand = (res.status == _lp.OPTIMAL) & (r < -R.tol)
+        cand = (res.status == _lp.OPTIMAL) & (r < 0.0)
         proven = np.zeros(K, dtype=bool)
         idx = np.flatnonzero(cand)
         if idx.size == 0:
@@ -685,9 +826,15 @@ class Polytope(SetBase):
         """The same set without redundant rows (LP test per row, tolerance ``tol``).
 
         Row ``i`` is redundant when ``max a_i.x`` over the other rows (with row ``i``
-        relaxed by 1) is ``<= b_i + tol``. Rows that are redundant only together (e.g.
-        duplicates) are removed one at a time, so one of each group is kept. Vacuous rows
-        (``b = inf``, ``0.x <= b >= 0``) are dropped.
+        relaxed by 1) is ``<= b_i + tol``, in the scaled coordinates of the polytope
+        (``tol = 1e-9`` times its scale: translation and scale invariant). This errs
+        outward: a row that is only nearly redundant may be removed, which can enlarge
+        the set by up to ``tol`` -- the wrong direction for an inner set, so do not feed
+        the result of ``minimal()`` to an inner (certified) test when that matters; keep
+        the original rows there (the box tests are fast with redundant rows anyway).
+        Rows that are redundant only together (e.g. duplicates) are removed one at a time,
+        so one of each group is kept. Vacuous rows (``b = inf``, ``0.x <= b >= 0``) are
+        dropped.
 
         Returns
         -------
@@ -703,7 +850,7 @@ class Polytope(SetBase):
         if self.is_empty():
             return Polytope.empty(n)
         R = self._rows()
-        A, b, An, bn, tol = R.A, R.b, R.An, R.bn, R.tol
+        A, b, An, bn, tol = R.A, R.b, R.An, R.bz, RTOL
         m = An.shape[0]
         # exact duplicate normals: keep the smallest right-hand side
         order = np.lexsort((bn, *An.T[::-1]))
@@ -1025,7 +1172,10 @@ class Polytope(SetBase):
                 meth = "support" if d <= 4 else "vertices"
         if meth == "elimination":
             R = self._rows()
-            A_p, b_p = _hull.cdd_eliminate(R.An, R.bn, dl)
+            if _hull._cdd() is not None:
+                A_p, b_p = _hull.cdd_eliminate(R.An, R.bn, dl)
+            else:
+                A_p, b_p = _hull.fm_eliminate(R.An, R.bn, dl, _prune_rows)
             return Polytope(A_p, b_p)
         self._require_bounded_nonempty(f"the projection by method '{meth}'")
         if meth == "vertices":
@@ -1034,7 +1184,9 @@ class Polytope(SetBase):
 
     def _project_support(self, dims: list[int]) -> Polytope:
         n, d = self.dim, len(dims)
-        tol = self._rows().tol
+        R = self._rows()
+        # LP accuracy (scaled coordinates) plus the rounding of coordinates of size |c0|
+        tol = R.tol + 64 * _U * float(np.abs(R.c0).max(initial=0.0))
 
         def lp_max(Dy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             D = np.zeros((Dy.shape[0], n))
@@ -1111,17 +1263,21 @@ class Polytope(SetBase):
 
     # ------------------------------------------------------ comparisons
     def is_subset(self, other: Any, tol: float | None = None) -> bool:
-        """Whether ``P ⊆ other`` (LP test with tolerance).
+        """Whether ``P ⊆ other``.
 
         For a polytope Q: ``max_{x in P} a_j.x <= b_j + tol`` for every (unit-scaled) row
-        j of Q. For a union: the set difference ``P \\ Q_1 \\ ... \\ Q_p`` has no piece
-        with an inner ball of radius ``> tol`` (see :meth:`PolytopeUnion.contains_box`).
+        j of Q, by LPs. This comparison errs toward ``True`` by ``tol`` (a distance): it
+        is used to compare sets computed in floating point (e.g. to detect that a sequence
+        of pre-sets has converged), not as a certificate. With ``tol=0`` a ``True`` is
+        still only as accurate as the LP solution. For a union (full-dimensional bounded
+        P only, else ``False``): proven like :meth:`PolytopeUnion.contains_box`.
 
         Parameters
         ----------
         other : Polytope, Box or PolytopeUnion
         tol : float, optional
-            Default: the tolerance of ``other`` (see the module notes).
+            Default: ``1e-9`` times the scale of ``other`` (the largest distance from
+            its reference point to its facets: translation and scale invariant).
 
         Returns
         -------
@@ -1135,9 +1291,13 @@ class Polytope(SetBase):
             if self.is_empty():
                 return True
             R = self._rows()
+            if not self.is_bounded():
+                return False
+            if not self.is_full_dimensional():
+                return self._flat_subset_of_union(other)
             box = self.bounding_box().as_array()[None]
             centre = self._chebyshev()[0][None]
-            return _uncovered(other._members(), box, centre, [(R.An, R.bn)], tol)[0] is None
+            return _uncovered(other._members(), box, centre, [(R.A, R.b)])[0] is None
         Q = Polytope._coerce(other, n)
         if self.is_empty():
             return True
@@ -1149,6 +1309,30 @@ class Polytope(SetBase):
             return True
         h = np.asarray(self.support(QR.An))
         return bool(np.all(h <= QR.bn + tol_))
+
+    def _flat_subset_of_union(self, U: PolytopeUnion) -> bool:
+        """``P ⊆ U`` for a bounded P without interior, decided in the affine hull of P.
+
+        The members are restricted to the affine hull ``{o + Q t}`` of the vertices of P
+        (rows ``A Q``, ``b - A o``, rounded), where P has an interior, and the covering
+        engine runs there: a proof up to the rounding of that restriction only.
+        """
+        V = self.vertices()
+        o, Q, _ = _hull.affine_hull(V)
+        r = Q.shape[1]
+        if r == 0:
+            return bool(U.contains(V[0]))
+        T = (V - o) @ Q
+        R = self._rows()
+        members = []
+        for M in U._members():
+            MR = M._rows()
+            Mt = Polytope(MR.A @ Q, MR.b - MR.A @ o)
+            if not Mt.is_empty():
+                members.append(Mt)
+        box = np.stack([T.min(axis=0), T.max(axis=0)], axis=-1)[None]
+        hard = [(R.A @ Q, R.b - R.A @ o)]
+        return _uncovered(members, box, T.mean(axis=0)[None], hard)[0] is None
 
     def __eq__(self, other: object) -> bool:
         if isinstance(other, (Polytope, Box)):
@@ -1222,6 +1406,106 @@ class Polytope(SetBase):
         return f"Polytope(dim={self.dim}, constraints={self.n_constraints})"
 
 
+def _prune_rows(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Redundant rows removed (:meth:`Polytope.minimal`); an empty set as one row."""
+    P = Polytope(A, b)
+    if P.is_empty():
+        return np.zeros((1, A.shape[1])), np.array([-1.0])
+    M = P.minimal()
+    return np.array(M.A), np.array(M.b)
+
+
+def _frac_up(v: Fraction) -> float:
+    """The smallest float ``>= v`` (up to one ulp)."""
+    f = float(v)
+    if Fraction(f) < v:
+        f = math.nextafter(f, math.inf)
+    return f
+
+
+def _rat_nullspace(M: list[list[Fraction]], k: int) -> list[list[Fraction]]:
+    """Basis of ``{v in Q^k : M v = 0}`` by exact Gauss–Jordan elimination."""
+    rows = [list(r) for r in M]
+    pivots: list[int] = []
+    r = 0
+    for col in range(k):
+        piv = next((i for i in range(r, len(rows)) if rows[i][col] != 0), None)
+        if piv is None:
+            continue
+        rows[r], rows[piv] = rows[piv], rows[r]
+        pv = rows[r][col]
+        rows[r] = [x / pv for x in rows[r]]
+        for i in range(len(rows)):
+            if i != r and rows[i][col] != 0:
+                f = rows[i][col]
+                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r], strict=True)]
+        pivots.append(col)
+        r += 1
+        if r == len(rows):
+            break
+    free = [c for c in range(k) if c not in pivots]
+    basis = []
+    for fc in free:
+        v = [Fraction(0)] * k
+        v[fc] = Fraction(1)
+        for i, pc in enumerate(pivots):
+            v[pc] = -rows[i][fc]
+        basis.append(v)
+    return basis
+
+
+def _farkas_empty(A: np.ndarray, b: np.ndarray, y: np.ndarray) -> bool:
+    """Exact proof that ``{x : A x <= b}`` is empty, guided by approximate multipliers.
+
+    On the support of ``y`` (dropping its smallest entries one at a time), the exact
+    null space of ``A_S^T`` is computed; a one-dimensional null space spanned by
+    ``v >= 0`` with ``b_S.v < 0`` is a Farkas certificate: ``0 = v^T A x <= v.b < 0``.
+    """
+    y = np.where(np.isfinite(y), y, 0.0)
+    if y.size == 0 or y.max(initial=0.0) <= 0.0:
+        return False
+    order = np.argsort(-y)
+    S = [int(i) for i in order if y[i] > 1e-12 * y.max()]
+    n = A.shape[1]
+    while len(S) >= 1:
+        k = len(S)
+        M = [[Fraction(float(A[i, j])) for i in S] for j in range(n)]
+        basis = _rat_nullspace(M, k)
+        if len(basis) == 1:
+            v = basis[0]
+            if sum(v) < 0:
+                v = [-x for x in v]
+            if all(x >= 0 for x in v) and \
+                    sum((x * Fraction(float(b[i])) for x, i in zip(v, S, strict=True)),
+                        Fraction(0)) < 0:
+                return True
+            return False
+        if not basis:
+            return False
+        S = S[:-1]
+    return False
+
+
+def _exact_box_slack(y: np.ndarray, A: np.ndarray, b: np.ndarray, lo: np.ndarray,
+                     hi: np.ndarray) -> Fraction | None:
+    """Exact ``min_{x in [lo, hi]} (A^T y).x - y.b`` (None when it is ``-inf``)."""
+    idx = np.flatnonzero(y != 0.0)
+    yf = [Fraction(float(y[i])) for i in idx]
+    beta = sum((v * Fraction(float(b[i])) for v, i in zip(yf, idx, strict=True)),
+               Fraction(0))
+    total = -beta
+    for j in range(A.shape[1]):
+        g = sum((v * Fraction(float(A[i, j])) for v, i in zip(yf, idx, strict=True)),
+                Fraction(0))
+        if g == 0:
+            continue
+        bound = lo[j] if g > 0 else hi[j]
+        if not np.isfinite(bound):
+            return None
+        total += g * Fraction(float(bound))
+    return total
+
+
 def _dedupe(V: np.ndarray, tol: float) -> np.ndarray:
     """Drop points closer than ``tol`` (inf-norm) to an earlier point."""
     if V.shape[0] <= 1:
@@ -1232,27 +1516,35 @@ def _dedupe(V: np.ndarray, tol: float) -> np.ndarray:
 
 
 def _certify_separation(Y: np.ndarray, A: np.ndarray, b: np.ndarray,
-                        bx: np.ndarray) -> np.ndarray:
+                        bx: np.ndarray, strict: bool = True) -> np.ndarray:
     """Rigorous check that ``y^T A x <= y^T b`` excludes each box.
 
     Parameters
     ----------
     Y : ndarray, shape (K, m), >= 0
-    A, b : raw finite rows of the polytope
+    A, b : raw finite rows, shapes (m, n), (m,); or one set per box, (K, m, n), (K, m)
     bx : ndarray, shape (K, n, 2)
 
     Returns
     -------
     ndarray of bool, shape (K,)
-        True where ``min_{x in box} (A^T y).x - y^T b > 0`` holds including every rounding
-        error of the evaluation (so the box does not meet the polytope).
+        True where ``min_{x in box} (A^T y).x - y^T b > 0`` (``>= 0`` when not
+        ``strict``) is proven: by a floating-point evaluation with a rigorous bound on its
+        rounding error, or, when the value lies within that bound, in exact rational
+        arithmetic.
     """
     K, m = Y.shape
-    n = A.shape[1]
-    G = Y @ A
-    beta = Y @ b
-    Ge = _gamma(m + 2) * (Y @ np.abs(A))  # |G - exact| <= Ge
-    be = _gamma(m + 2) * (Y @ np.abs(b))
+    n = A.shape[-1]
+    if A.ndim == 3:  # one row set per box: A (K, m, n), b (K, m)
+        G = np.einsum("km,kmn->kn", Y, A)
+        beta = (Y * b).sum(axis=1)
+        Ge = _gamma(m + 2) * np.einsum("km,kmn->kn", Y, np.abs(A))
+        be = _gamma(m + 2) * (Y * np.abs(b)).sum(axis=1)
+    else:
+        G = Y @ A
+        beta = Y @ b
+        Ge = _gamma(m + 2) * (Y @ np.abs(A))  # |G - exact| <= Ge
+        be = _gamma(m + 2) * (Y @ np.abs(b))
     lo, hi = bx[..., 0], bx[..., 1]
     with np.errstate(invalid="ignore", over="ignore"):
         t = np.where(G > 0, G * lo, np.where(G < 0, G * hi, 0.0))
@@ -1262,8 +1554,15 @@ def _certify_separation(Y: np.ndarray, A: np.ndarray, b: np.ndarray,
                + np.where(Ge > 0, Ge * M, 0.0).sum(axis=1) + be)
         slack = L - beta
         err = (err + _gamma(4) * (np.abs(L) + np.abs(beta))) * (1 + 8 * _U) + 1e-300
-        ok = slack > err
-    return np.where(np.isfinite(slack) & np.isfinite(err), ok, False)
+        ok = slack > err if strict else slack >= err
+        fin = np.isfinite(slack) & np.isfinite(err)
+        amb = fin & ~ok & (slack >= -err)
+    ok = np.where(fin, ok, False)
+    for k in np.flatnonzero(amb).tolist():
+        Ak, bk = (A[k], b[k]) if A.ndim == 3 else (A, b)
+        v = _exact_box_slack(Y[k], Ak, bk, lo[k], hi[k])
+        ok[k] = v is not None and (v > 0 if strict else v >= 0)
+    return ok
 
 
 def hull(*sets: Any) -> Polytope:
@@ -1420,14 +1719,20 @@ class PolytopeUnion(SetBase):
            being split into ``R ∩ {a_j.x >= b_j} ∩ {a_l.x <= b_l, l < j}`` over the rows
            of ``P_i`` that cut the box (rows whose half-space holds the box, or members
            separated from the box, are skipped in closed form). After each member the new
-           pieces of all boxes are pruned together by one stacked Chebyshev LP
-           (``max r`` s.t. ``a.x + r <= b`` for the unit rows of the piece, ``x`` in the
-           box): a piece with ``r <= tol`` has no point outside the members by more than
-           ``tol`` and is dropped. ``True`` when no piece is left.
+           pieces of all boxes are pruned together by one stacked LP (``max r`` s.t.
+           ``a.x + r <= b`` for the scaled rows of the piece, ``x`` in the box mapped to
+           ``[-1, 1]^n``); a piece is dropped only when the LP multipliers give a
+           certificate that the piece has no interior point, checked on the stored rows
+           with a rigorous rounding bound or in exact rational arithmetic. ``True`` when
+           no piece is left (for a box of positive widths, a non-empty ``box \\ ∪ P_i``
+           would contain an interior point of some piece).
 
-        ``True`` of stage 3 therefore means ``box ⊆ ∪_i {x : A_i x <= b_i + tol}``
-        (unit rows); ``False`` comes with a witness point of the box that lies outside
-        every member by at least ``tol``.
+        ``True`` is therefore a proof of ``box ⊆ P_1 ∪ ... ∪ P_p`` for the stored
+        ``(A_i, b_i)``; ``False`` means "not proven": the box has a point outside the
+        union, or it could not be decided (e.g. a gap or overlap between members at the
+        level of rounding, or a box of zero width). The witness of a ``False`` is a point
+        of the box outside every member when one was found (stage 2, or an LP point of
+        an undecided piece, which may lie on the boundary of a member).
 
         Parameters
         ----------
@@ -1637,39 +1942,52 @@ class PolytopeUnion(SetBase):
 
 # ===================================================== the covering engine
 def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
-               hard: list[tuple[np.ndarray, np.ndarray]] | None = None,
-               tol: float | None = None) -> list[np.ndarray | None]:
-    """For each region, a point of ``region \\ ∪ members`` (deep by ``> tol``) or None.
+               hard: list[tuple[np.ndarray, np.ndarray]] | None = None
+               ) -> list[np.ndarray | None]:
+    """For each region, None when ``region ⊆ ∪ members`` is proven, else a point.
+
+    The region ``box ∩ {hard rows}`` minus the members is split into pieces (see
+    :meth:`PolytopeUnion.contains_box`); a piece is dropped only with a certificate that
+    it has no interior point (:func:`_prune_pieces`). For a full-dimensional region,
+    no piece left proves ``region ⊆ ∪ members``: ``region \\ ∪ members`` is relatively
+    open, so if it were not empty it would contain an interior point of some piece.
 
     Parameters
     ----------
     members : list of Polytope
-        Non-empty polytopes.
+        Polytopes not proven empty.
     boxes : ndarray, shape (K, n, 2)
-        The regions (or boxes containing them when ``hard`` is given).
+        The regions (or boxes containing them when ``hard`` is given); every width must
+        be positive (a flat region is answered with its centre: undecided).
     centres : ndarray, shape (K, n)
-        A point of each region (returned when no member meets the region).
+        A point of each region (returned when it is not proven covered).
     hard : list of (A, b), optional
-        Extra rows of each region (unit rows), e.g. a polytope inside its bounding box.
-    tol : float, optional
-        Decision tolerance; default the largest tolerance of the members and boxes.
+        Extra raw rows of each region (e.g. a full-dimensional polytope inside its
+        bounding box).
 
     Returns
     -------
     list of (ndarray (n,) or None)
+        A returned point lies in a piece that is not proven empty: it is usually outside
+        every member, but not necessarily so (an undecided piece).
     """
     K, n = boxes.shape[0], boxes.shape[1]
     if hard is None:
         hard = [(np.zeros((0, n)), np.zeros(0))] * K
-    if tol is None:
-        fin = np.abs(boxes[np.isfinite(boxes)])
-        tols = [P._rows().tol for P in members]
-        tol = max([RTOL * max(1.0, float(fin.max(initial=0.0)))] + tols)
-    # pieces: parallel lists (region index, soft rows, soft rhs, a point of the piece)
-    piece_k: list[int] = list(range(K))
-    piece_A: list[np.ndarray] = [np.zeros((0, n))] * K
-    piece_b: list[np.ndarray] = [np.zeros(0)] * K
-    piece_c: list[np.ndarray] = [centres[k] for k in range(K)]
+    flat = ~(boxes[..., 1] > boxes[..., 0]).all(axis=1)
+    out: list[np.ndarray | None] = [None] * K
+    piece_k: list[int] = []
+    piece_A: list[np.ndarray] = []
+    piece_b: list[np.ndarray] = []
+    piece_c: list[np.ndarray] = []
+    for k in range(K):
+        if flat[k]:
+            out[k] = np.asarray(centres[k], dtype=float)
+        else:
+            piece_k.append(k)
+            piece_A.append(np.zeros((0, n)))
+            piece_b.append(np.zeros(0))
+            piece_c.append(centres[k])
     for P in members:
         if not piece_k:
             break
@@ -1682,56 +2000,122 @@ def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
         new_k: list[int] = []
         new_A: list[np.ndarray] = []
         new_b: list[np.ndarray] = []
-        kept = ([], [], [], [])
+        kk: list[int] = []
+        kA: list[np.ndarray] = []
+        kb: list[np.ndarray] = []
+        kc: list[np.ndarray] = []
+        Js = [np.flatnonzero(row) for row in relevant]
+        negA, negb = -PR.A, -PR.b
         for k, A_p, b_p, c_p in zip(piece_k, piece_A, piece_b, piece_c, strict=True):
             i = pos[k]
             if separated[i]:
-                for lst, v in zip(kept, (k, A_p, b_p, c_p), strict=True):
-                    lst.append(v)
+                kk.append(k)
+                kA.append(A_p)
+                kb.append(b_p)
+                kc.append(c_p)
                 continue
-            J = np.flatnonzero(relevant[i])
+            J = Js[i]
             for t, j in enumerate(J.tolist()):
                 new_k.append(k)
-                new_A.append(np.vstack([A_p, -PR.An[[j]], PR.An[J[:t]]]))
-                new_b.append(np.concatenate([b_p, -PR.bn[[j]], PR.bn[J[:t]]]))
+                new_A.append(np.concatenate((A_p, negA[j:j + 1], PR.A[J[:t]])))
+                new_b.append(np.concatenate((b_p, negb[j:j + 1], PR.b[J[:t]])))
         if new_k:
-            r, X = _chebyshev_pieces(new_A, new_b, [hard[k] for k in new_k], boxes[new_k],
-                                     tol)
-            for idx in np.flatnonzero(r > tol).tolist():
-                for lst, v in zip(kept, (new_k[idx], new_A[idx], new_b[idx], X[idx]),
-                                  strict=True):
-                    lst.append(v)
-        piece_k, piece_A, piece_b, piece_c = (list(x) for x in kept)
-    out: list[np.ndarray | None] = [None] * K
+            gone, X = _prune_pieces(new_A, new_b, [hard[k] for k in new_k], boxes[new_k])
+            for idx in np.flatnonzero(~gone).tolist():
+                kk.append(new_k[idx])
+                kA.append(new_A[idx])
+                kb.append(new_b[idx])
+                kc.append(X[idx])
+        piece_k, piece_A, piece_b, piece_c = kk, kA, kb, kc
     for k, c in zip(piece_k, piece_c, strict=True):
         if out[k] is None:
             out[k] = np.asarray(c, dtype=float)
     return out
 
 
-def _chebyshev_pieces(As: list[np.ndarray], bs: list[np.ndarray],
-                      hard: list[tuple[np.ndarray, np.ndarray]], boxes: np.ndarray,
-                      tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Stacked LPs ``max r`` s.t. ``a.x + r <= b`` (soft unit rows), hard rows ``h.x <= g``,
-    ``x`` in the box, ``r <= max(1, 1000 tol)``; returns the optima r and the points x."""
+def _prune_pieces(As: list[np.ndarray], bs: list[np.ndarray],
+                  hard: list[tuple[np.ndarray, np.ndarray]], boxes: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Which pieces ``{x in box : A x < b (soft, strict), H x <= g (hard)}`` are empty.
+
+    One stacked LP (HiGHS) per batch, in the coordinates ``u`` of the box mapped to
+    ``[-1, 1]^n`` (translation and scale invariant): ``max r`` s.t. ``a'.u + r <= b'``
+    on the unit-scaled soft rows, the hard rows, ``u`` in the box, ``r <= 1``. Its
+    multipliers ``y`` give the candidate certificate ``min_{x in box} (A^T y_s + H^T y_h)
+    .x - b.y_s - g.y_h >= 0`` with ``y_s >= 0`` not zero, which is checked on the raw
+    rows with a rigorous rounding bound and, when within that bound, in exact rational
+    arithmetic (:func:`_certify_separation`). A certified piece has no point where the
+    soft rows hold strictly; nothing is dropped on the LP value alone.
+
+    Parameters
+    ----------
+    As, bs : lists of raw soft rows, shapes (m_k, n), (m_k,)
+    hard : list of raw hard rows (H, g)
+    boxes : ndarray, shape (K, n, 2), positive widths
+
+    Returns
+    -------
+    gone : ndarray of bool, shape (K,)
+        Proven without interior.
+    X : ndarray, shape (K, n)
+        The LP points (a point of each piece that is not proven empty, when its LP
+        value is positive).
+    """
     K = len(As)
     n = boxes.shape[1]
-    blocks = []
-    rhs = []
-    sizes = []
-    for A, b, (H, g) in zip(As, bs, hard, strict=True):
-        blocks.append(np.hstack([A, np.ones((A.shape[0], 1))]))
-        rhs.append(b)
+    lo, hi = boxes[..., 0], boxes[..., 1]
+    fin = np.isfinite(lo) & np.isfinite(hi)
+    with np.errstate(invalid="ignore", over="ignore"):
+        c = np.where(fin, 0.5 * lo + 0.5 * hi, np.clip(0.0, lo, hi))
+        D = np.where(fin, 0.5 * hi - 0.5 * lo, 1.0)
+        ulo = np.where(np.isfinite(lo), (lo - c) / D, -np.inf)
+        uhi = np.where(np.isfinite(hi), (hi - c) / D, np.inf)
+    sizes = np.array([A.shape[0] + H.shape[0] for A, (H, _) in zip(As, hard, strict=True)],
+                     dtype=np.int64)
+    nsoft = np.array([A.shape[0] for A in As], dtype=np.int64)
+    m = int(sizes.max(initial=0))
+    Apad = np.zeros((K, m, n))
+    bpad = np.zeros((K, m))
+    for k, (A, b, (H, g)) in enumerate(zip(As, bs, hard, strict=True)):
+        ms = A.shape[0]
+        Apad[k, :ms] = A
+        bpad[k, :ms] = b
         if H.shape[0]:
-            blocks.append(np.hstack([H, np.zeros((H.shape[0], 1))]))
-            rhs.append(g)
-        sizes.append(A.shape[0] + H.shape[0])
+            Apad[k, ms:sizes[k]] = H
+            bpad[k, ms:sizes[k]] = g
+    valid = np.arange(m)[None, :] < sizes[:, None]
+    soft = np.arange(m)[None, :] < nsoft[:, None]
+    M = Apad * D[:, None, :]
+    with np.errstate(over="ignore", invalid="ignore"):
+        r_ = bpad - np.einsum("kmn,kn->km", Apad, c)
+    nu = np.linalg.norm(M, axis=2)
+    nu = np.where(nu > 0, nu, 1.0)
+    rows = np.concatenate([(M / nu[..., None])[valid], soft[valid][:, None].astype(float)],
+                          axis=1)
+    rhs_all = (r_ / nu)[valid]
     C = np.zeros((K, n + 1))
     C[:, -1] = -1.0
-    lb = np.hstack([boxes[..., 0], np.full((K, 1), -np.inf)])
-    ub = np.hstack([boxes[..., 1], np.full((K, 1), max(1.0, 1e3 * tol))])
-    res = _lp.block_lp(C, np.vstack(blocks), np.concatenate(rhs),
-                       np.repeat(np.arange(K), sizes), lb, ub)
-    _lp.check_status(res.status, "a covering test")
-    r = np.where(res.status == _lp.OPTIMAL, res.x[:, -1], -np.inf)
-    return r, res.x[:, :n]
+    lb = np.hstack([ulo, np.full((K, 1), -np.inf)])
+    ub = np.hstack([uhi, np.ones((K, 1))])
+    good = np.isfinite(rhs_all)
+    rhs_all = np.where(good, rhs_all, 0.0)
+    res = _lp.block_lp(C, rows, rhs_all, np.repeat(np.arange(K), sizes), lb, ub)
+    opt = res.status == _lp.OPTIMAL
+    U = np.where(opt[:, None], res.x[:, :n], 0.0)
+    X = np.clip(c + D * U, lo, hi)
+    r = np.where(opt, res.x[:, -1], np.inf)
+    gone = np.zeros(K, dtype=bool)
+    cand = np.flatnonzero(opt & (r <= 1e-6))
+    if cand.size == 0 or m == 0:
+        return gone, X
+    Y = np.zeros((K, m))
+    Y[valid] = res.y
+    Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0) / nu
+    Y[~valid] = 0.0
+    G = np.zeros((K, m), dtype=bool)
+    G[valid] = good
+    ok_soft = (np.where(soft, Y, 0.0).max(axis=1) > 0.0) & (G | ~valid).all(axis=1)
+    Yc = Y[cand]
+    proven = _certify_separation(Yc, Apad[cand], bpad[cand], boxes[cand], strict=False)
+    gone[cand] = proven & ok_soft[cand]
+    return gone, X

@@ -244,7 +244,9 @@ def test_support_bounding_box_and_minimal_form():
     np.testing.assert_allclose(fresh.support(D), (V @ D.T).max(axis=0), atol=1e-9)
     assert isinstance(fresh.support(D[0]), float)
     B = P.bounding_box()
-    assert B.contains(V).all()
+    pts = rng.uniform(V.min(axis=0) - 0.1, V.max(axis=0) + 0.1, (20000, 3))
+    inside = pts[P.contains(pts)]
+    assert inside.shape[0] > 100 and B.contains(inside).all()
     np.testing.assert_allclose(B.lo, V.min(axis=0), atol=1e-9)
     np.testing.assert_allclose(B.hi, V.max(axis=0), atol=1e-9)
     # redundant rows: duplicates, a scaled copy, a loose row, an implied row

@@ -1,0 +1,312 @@
+"""Certified answers of the polytope tests do not depend on translation or scale.
+
+Every claim is checked against the stored data in exact rational arithmetic: a box
+reported inside has its corners (and samples) inside, a box reported disjoint has no
+sampled point inside, ``is_empty()`` is never True for a set with a known point.
+"""
+
+from fractions import Fraction
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import casadi_cmpc as cm
+from casadi_cmpc.sets import _hull
+
+
+def exact_in(A, b, x):
+    """x in {A x <= b}, exactly (stored floats read as rationals)."""
+    xf = [Fraction(float(v)) for v in x]
+    return all(sum((Fraction(float(a)) * v for a, v in zip(row, xf, strict=True)),
+                   Fraction(0)) <= Fraction(float(bi))
+               for row, bi in zip(A, b, strict=True) if np.isfinite(bi))
+
+
+def exact_in_union(U, x):
+    return any(exact_in(P.A, P.b, x) for P in U.polytopes)
+
+
+def corners(box):
+    n = box.shape[0]
+    out = []
+    for k in range(2 ** n):
+        out.append([box[j, (k >> j) & 1] for j in range(n)])
+    return np.array(out)
+
+
+def samples(box, rng, k=60):
+    pts = rng.uniform(box[:, 0], box[:, 1], (k, box.shape[0]))
+    return np.vstack([pts, corners(box)])
+
+
+# ----------------------------------------------------------------- the review's cases
+def test_union_gap_far_from_origin_is_not_covered():
+    for x0 in (0.0, 1e6, -1e8, 3e7):
+        for g in (1e-4, 1e-7):
+            L = cm.Polytope.from_box(cm.Box([x0 - 1, 0], [x0, 1]))
+            R = cm.Polytope.from_box(cm.Box([x0 + g, 0], [x0 + 1 + g, 1]))
+            U = cm.PolytopeUnion([L, R])
+            box = np.array([[[x0 - 0.5, x0 + 0.5], [0.2, 0.8]]])
+            assert not U.contains_box(box)[0]
+            if g >= 1e-4 * max(1.0, abs(x0)) * 1e-6:
+                mid = np.array([x0 + g / 2, 0.5])
+                if mid[0] > x0 and mid[0] < x0 + g:
+                    assert not exact_in_union(U, mid)
+            # closing the gap exactly: covered
+            R2 = cm.Polytope.from_box(cm.Box([x0, 0], [x0 + 1, 1]))
+            assert cm.PolytopeUnion([L, R2]).contains_box(box)[0]
+
+
+@pytest.mark.parametrize("y0", [0.0, 1e6, 1e10, -1e10])
+def test_small_triangle_far_away_keeps_its_dimension(y0):
+    V = np.array([[0.0, y0], [0.5, y0], [0.0, y0 + 0.5]])
+    T = cm.Polytope.from_vertices(V)
+    assert T.is_full_dimensional()
+    assert len(T.vertices()) == 3
+    assert {tuple(v) for v in T.vertices()} == {tuple(v) for v in V}
+    for v in V:
+        assert exact_in(T.A, T.b, v)
+    # a point just outside the hypotenuse is outside the H-representation
+    assert not T.contains([0.3, y0 + 0.3])
+    np.testing.assert_allclose(T.support([1.0, 1.0]), 0.5 + y0, rtol=1e-15)
+    fresh = cm.Polytope(T.A, T.b)
+    np.testing.assert_allclose(np.sort(fresh.vertices(), axis=0), np.sort(V, axis=0),
+                               atol=1e-6 * max(1.0, abs(y0)) * 1e-9 + 1e-9)
+
+
+def test_sivia_contract_keeps_solutions_of_a_far_triangle():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f", [x], [x])
+    V = np.array([[0.0, 1e10], [0.5, 1e10], [0.0, 1e10 + 0.5]])
+    T = cm.Polytope.from_vertices(V)
+    S = cm.sivia(f, cm.Box([-0.1, 1e10 - 0.1], [0.6, 1e10 + 0.6]), T, eps=0.05, contract=True)
+    pts = np.array([[0.1, 1e10 + 0.1], [0.2, 1e10 + 0.25], [0.01, 1e10 + 0.01]])
+    assert S.contains(pts).all() if hasattr(S, "contains") else True
+    assert len(S.inner) > 0
+    for box in S.inner:
+        for c in corners(np.asarray(box)):
+            assert exact_in(T.A, T.b, c)
+
+
+@pytest.mark.parametrize("radius", [1e-6, 1e-9])
+@pytest.mark.parametrize("dist", [100.0, 1e6])
+def test_tiny_sets_far_away_do_not_raise(radius, dist):
+    th = np.arange(6) * np.pi / 3
+    V = np.c_[dist + radius * np.cos(th), radius * np.sin(th)]
+    Pv = cm.Polytope.from_vertices(V)
+    for P in (Pv, cm.Polytope(Pv.A, Pv.b)):
+        assert not P.is_empty()
+        B = P.bounding_box()
+        for v in V:
+            assert B.contains(v)
+        assert B.hi[0] - B.lo[0] < 3 * radius + 64 * np.spacing(dist)
+        M = P.minimal()
+        assert M.n_constraints == 6
+        assert len(P.vertices()) == 6
+        x = ca.SX.sym("x", 2)
+        S = cm.sivia(ca.Function("f", [x], [x]), cm.Box(V.min(0) - radius, V.max(0) + radius),
+                     P, eps=radius / 4)
+        assert len(S.inner) > 0
+        for box in S.inner:
+            for c in corners(np.asarray(box)):
+                assert exact_in(P.A, P.b, c)
+
+
+# ------------------------------------------------------------------- flat sets
+@pytest.mark.parametrize("n", [2, 3, 4])
+@pytest.mark.parametrize("shift", [0.0, 1e6, -1e8])
+def test_flat_hulls_are_described_by_equality_pairs(n, shift):
+    rng = np.random.default_rng(n)
+    # a triangle (a segment for n = 2) in the coordinate plane x_{n-1} = shift + 0.5
+    k = min(3, n)
+    pts = np.zeros((k, n))
+    pts[:, : k - 1] = np.round(rng.uniform(-1, 1, (k, k - 1)), 3) + shift
+    pts[:, -1] = shift + 0.5
+    extra = pts.mean(axis=0)  # not extreme
+    P = cm.Polytope.from_vertices(np.vstack([pts, extra]))
+    assert not P.is_full_dimensional()
+    V = P.vertices()
+    assert {tuple(v) for v in V} == {tuple(v) for v in pts}
+    e = np.zeros(n)
+    e[-1] = 1.0
+    # the equality pair x_{n-1} = shift + 0.5 is stored exactly
+    assert any(np.array_equal(a, e) and b == shift + 0.5 for a, b in zip(P.A, P.b, strict=True))
+    assert any(np.array_equal(a, -e) and b == -(shift + 0.5)
+               for a, b in zip(P.A, P.b, strict=True))
+    D = rng.normal(size=(10, n))
+    np.testing.assert_allclose(P.support(D), (pts @ D.T).max(axis=0),
+                               rtol=1e-12, atol=1e-9 * max(1, abs(shift)))
+    off = extra.copy()
+    off[-1] += 1e-3
+    assert not P.contains(off)
+    for p in pts:
+        assert exact_in(P.A, P.b, p)
+
+
+# ---------------------------------------------------------- property tests
+def _base_polytope(rng, n):
+    """Integer vertices: an exact reference in rational arithmetic."""
+    V = rng.integers(-5, 6, size=(n + 4, n)).astype(float)
+    while np.linalg.matrix_rank(V[1:] - V[0]) < n:
+        V = rng.integers(-5, 6, size=(n + 4, n)).astype(float)
+    return cm.Polytope.from_vertices(V)
+
+
+settings.register_profile("robust", max_examples=25, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31),
+       shift=st.floats(-1e8, 1e8), log_s=st.floats(-6, 6))
+def test_polytope_box_answers_survive_translation_and_scaling(n, seed, shift, log_s):
+    rng = np.random.default_rng(seed)
+    P0 = _base_polytope(rng, n)
+    s = 10.0 ** log_s
+    t = shift * rng.uniform(-1, 1, n)
+    P = cm.Polytope(P0.A, P0.b * s + P0.A @ t)  # the stored (A, b) is the reference
+    P = cm.Polytope(P.A, P.b)
+    c = t + s * rng.uniform(-6, 6, (40, n))
+    r = s * rng.uniform(0.01, 3, (40, n))
+    boxes = np.stack([c - r, c + r], axis=-1)
+    # include boxes touching a vertex / a facet
+    inside = P.contains_box(boxes)
+    meets = P.intersects_box(boxes)
+    assert not np.any(inside & ~meets)
+    assert not P.is_empty()
+    for k in range(boxes.shape[0]):
+        pts = samples(boxes[k], rng, 30)
+        if inside[k]:
+            for p in corners(boxes[k]):
+                assert exact_in(P.A, P.b, p)
+        if not meets[k]:
+            for p in pts:
+                assert not exact_in(P.A, P.b, p)
+    B = P.bounding_box().as_array()
+    V = P.vertices()  # floating-point vertices: inside B up to rounding
+    slack = 1e-9 * s + 64 * np.spacing(np.abs(V).max())
+    assert np.all(V >= B[:, 0] - slack) and np.all(V <= B[:, 1] + slack)
+    # every point of the stored set is inside the bounding box (exactly)
+    for p in samples(np.stack([B[:, 0] - s, B[:, 1] + s], axis=-1), rng, 200):
+        if exact_in(P.A, P.b, p):
+            assert np.all(p >= B[:, 0]) and np.all(p <= B[:, 1])
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31),
+       shift=st.floats(-1e8, 1e8), log_s=st.floats(-6, 6), log_gap=st.floats(-12, 0))
+def test_union_answers_survive_translation_and_scaling(n, seed, shift, log_s, log_gap):
+    rng = np.random.default_rng(seed)
+    s = 10.0 ** log_s
+    t = shift * rng.uniform(-1, 1, n)
+    g = s * 10.0 ** log_gap * rng.choice([0.0, 1.0, -1.0])  # gap, touch or overlap
+    lo1 = t.copy()
+    hi1 = t + s
+    lo2 = t.copy()
+    lo2[0] = hi1[0] + g
+    hi2 = lo2 + s
+    L = cm.Polytope.from_box(cm.Box(lo1, hi1))
+    R = cm.Polytope.from_box(cm.Box(lo2, np.maximum(hi2, lo2 + s / 2)))
+    tilt = rng.normal(size=n)
+    tilt /= np.linalg.norm(tilt)
+    cut = cm.Polytope(np.vstack([R.A, tilt]), np.concatenate([R.b, [tilt @ hi2 + s]]))
+    U = cm.PolytopeUnion([L, cut])
+    c = hi1[0] + s * rng.uniform(-0.5, 0.5, (30, 1)) * np.eye(n)[0] + \
+        (t + s * rng.uniform(0.05, 0.95, (30, n))) * (1 - np.eye(n)[0])
+    r = s * rng.uniform(1e-3, 0.4, (30, n))
+    boxes = np.stack([c - r, c + r], axis=-1)
+    inside = U.contains_box(boxes)
+    meets = U.intersects_box(boxes)
+    assert not np.any(inside & ~meets)
+    for k in range(boxes.shape[0]):
+        if inside[k]:
+            pts = samples(boxes[k], rng, 30)
+            if g > 0 and boxes[k][0, 0] < hi1[0] < boxes[k][0, 1]:
+                mid = pts[0].copy()
+                mid[0] = hi1[0] + g / 2
+                if hi1[0] < mid[0] < lo2[0]:
+                    pts = np.vstack([pts, mid])
+            for p in pts:
+                assert exact_in_union(U, p)
+        if not meets[k]:
+            for p in samples(boxes[k], rng, 30):
+                assert not exact_in_union(U, p)
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(2, 4), shift=st.floats(-1e8, 1e8), log_s=st.floats(-6, 6),
+       log_w=st.floats(-14, 0), seed=st.integers(0, 2 ** 31))
+def test_emptiness_is_only_claimed_when_true(n, shift, log_s, log_w, seed):
+    rng = np.random.default_rng(seed)
+    s = 10.0 ** log_s
+    t = shift * rng.uniform(-1, 1, n)
+    w = s * 10.0 ** log_w * rng.choice([-1.0, 1.0])  # slab width: negative = empty
+    a = rng.normal(size=n)
+    A = np.vstack([np.eye(n), -np.eye(n), a, -a])
+    b = np.concatenate([t + s, -(t - s), [a @ t + w, -(a @ t)]])
+    P = cm.Polytope(A, b)
+    # a point of the stored set, found in exact arithmetic on a grid near t
+    if P.is_empty():
+        for p in samples(np.stack([t - s, t + s], axis=-1), rng, 200):
+            assert not exact_in(A, b, p)
+        assert w < 0
+    if w < 0 and abs(w) > 1e-6 * s:
+        # clearly empty after rounding: the certificate finds it
+        assert P.is_empty()
+    if w > 0 and abs(w) > 1e-6 * s:
+        assert not P.is_empty()
+
+
+# ------------------------------------------------------------ both backends
+@pytest.fixture(params=["cdd", "scipy"])
+def backend(request, monkeypatch):
+    if request.param == "scipy":
+        monkeypatch.setattr(_hull, "_cdd", lambda: None)
+    elif _hull._cdd() is None:
+        pytest.skip("pycddlib is not installed")
+    return request.param
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_vertices_projection_minimal_on_both_backends(backend, n):
+    rng = np.random.default_rng(10 + n)
+    V = rng.normal(size=(12, n))
+    P0 = cm.Polytope.from_vertices(V)
+    P = cm.Polytope(np.vstack([P0.A, P0.A[:2]]), np.concatenate([P0.b, P0.b[:2] + 1.0]))
+    W = P.vertices()
+    assert {tuple(np.round(v, 9)) for v in W} == {tuple(np.round(v, 9))
+                                                  for v in P0.vertices()}
+    M = P.minimal()
+    assert M.n_constraints == P0.n_constraints
+    for method in ("support", "vertices"):
+        Q = P.project([0, 1], method=method)
+        np.testing.assert_allclose(Q.support(np.eye(2)), V[:, :2].max(axis=0), atol=1e-9)
+    # an unbounded polyhedron: elimination (cddlib or Fourier-Motzkin)
+    H = cm.Polytope(np.vstack([P0.A[:, :2] @ np.eye(2), [[0.0, -1.0]]]) if n == 2 else
+                    np.vstack([np.eye(n)[:1], -np.eye(n)[:1], [[1.0] * n]]),
+                    np.concatenate([P0.b, [5.0]]) if n == 2 else np.array([1.0, 1.0, 2.0]))
+    E = H.project([0], method="elimination")
+    np.testing.assert_allclose(E.bounding_box().as_array()[0, 1], H.support(np.eye(n)[0]),
+                               atol=1e-9)
+    # a flat polytope in H-representation (no interior)
+    F = cm.Polytope(np.vstack([np.eye(n), -np.eye(n)]),
+                    np.concatenate([[1.0] * (n - 1) + [0.5], [1.0] * (n - 1) + [-0.5]]))
+    FV = F.vertices()
+    assert len(FV) == 2 ** (n - 1)
+    np.testing.assert_allclose(FV[:, -1], 0.5, atol=1e-12)
+
+
+def test_no_module_imports_cdd_at_import_time():
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['cdd'] = None\n"
+            "import casadi_cmpc as cm, numpy as np\n"
+            "import casadi_cmpc.sets.polytope, casadi_cmpc.control.linear_sets\n"
+            "P = cm.Polytope(np.vstack([np.eye(2), -np.eye(2)]), np.ones(4))\n"
+            "assert len(P.vertices()) == 4\n"
+            "assert len(P.project([0], method='elimination').minimal().A) == 2\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
