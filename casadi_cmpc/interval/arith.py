@@ -30,11 +30,34 @@ Domains and undefined results
 * A NaN bound means *possibly undefined, no information*. NaN propagates through every
   operation here, including the bounded ones (``atan``, ``tanh``, comparisons, ``if_else``,
   multiplication by 0), so a composite function that may be undefined somewhere on a box
-  gives NaN, not a deceptively bounded result. Compiled inclusion functions replace NaN
-  bounds by ``-inf``/``+inf`` on output, so callers see the whole real line and never NaN.
+  gives NaN, not a deceptively bounded result. Compiled inclusion functions replace a result
+  with a NaN bound by ``[-inf, inf]`` on output, so callers see the whole real line and never
+  NaN.
 
 This is deliberately never narrower than the true range over the whole box: a box containing
 points where the function may be undefined cannot be certified by any predicate.
+
+Invariant of every result
+-------------------------
+Each result ``(lo, hi)`` is, elementwise, either ``[nan, nan]`` ("possibly undefined, no
+information") or NaN-free with ``lo <= hi``, ``lo < +inf`` and ``hi > -inf``. A bound is
+never NaN on one side only: a NaN met in any operand bound, or produced inside an operation
+(``inf - inf``, ``0 * inf``, ``inf / inf``), makes the result NaN on both sides, so that no
+later operation (``fmin``, a comparison, a pole or branch test) can turn half of it into a
+bound. Overflow is not NaN: a lower bound that overflows to ``+inf`` stands for a finite real
+above the largest float, so it becomes ``MAX_FLOAT`` before it is rounded down (``exp`` of
+``[710, 711]`` is ``[1.797e308, inf]``); an upper bound that overflows to ``-inf`` becomes
+``-MAX_FLOAT``. Infinite bounds on the open side (``lo = -inf``, ``hi = +inf``) are
+unbounded intervals and are valid operands and results.
+
+Operations that branch on their operand bounds (``tan``, ``sin``, ``cos``, ``floor``,
+``ceil``, ``sign``, ``fabs``, ``sq``, ``fmin``, ``fmax``, ``copysign``, ``fmod``,
+``remainder``, ``atan2``, ``hypot``, ``pow``, comparisons, logic, ``if_else_zero``,
+``hull``, ``intersect``) give ``[nan, nan]`` for a NaN in *any* operand bound. The others
+(sums, products, monotone functions) compute each bound from the matching operand bounds
+and keep the invariant for operands that satisfy it; the wrappers of
+:mod:`~casadi_cmpc.interval.ops` make a one-sided NaN operand two-sided first. A constant
+operand that is not a finite real (``x + inf``) gives ``[nan, nan]``.
 
 Floating-point exceptions (overflow, invalid) are expected here and are not reported: callers
 that evaluate many operations wrap them in one ``np.errstate(all="ignore")`` (the compiled
@@ -42,6 +65,8 @@ evaluators and :mod:`~casadi_cmpc.interval.ops` do).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy import special as _special
@@ -53,40 +78,57 @@ TINY = 2.0 ** -1074  # smallest positive subnormal
 REL_LIBM = 2.0 ** -44  # relative margin for libm functions
 ABS_LIBM = 2.0 ** -1060  # absolute margin for libm functions (subnormal results)
 INF = np.inf
+MAX_FLOAT = float(np.finfo(float).max)
 PI_LO = 3.141592653589793  # float(pi) < pi
 PI_HI = np.nextafter(PI_LO, 4.0)  # > pi
 HALF_PI_HI = np.nextafter(1.5707963267948966, 2.0)
 _SIN_SAFE = 1e8  # beyond this magnitude, sin/cos/tan return their full range
 
 _abs = np.abs
+_isfinite = math.isfinite  # for scalar constants (cheaper than the numpy ufunc)
 _min = np.minimum
 _max = np.maximum
 _where = np.where
 
 
 # ---------------------------------------------------------------------------- rounding
+# The argument is the float result of ONE operation (correctly rounded, or a libm function
+# within its error model), or an infinite bound. A lower bound computed as +inf is then an
+# overflow: the exact value is a real above MAX_FLOAT (or +inf), so the lower bound becomes
+# MAX_FLOAT before it is rounded down (``inf - inf`` would give NaN, and +inf itself is above
+# the exact value). Likewise an upper bound of -inf becomes -MAX_FLOAT. NaN stays NaN
+# (np.minimum / np.maximum propagate it). The cap is not valid for a value computed by
+# several operations, where an intermediate overflow may hide a small exact result.
 def dn(x):
     """Round a sum/difference result down (sound for + and -)."""
+    x = _min(x, MAX_FLOAT)
     return x - _abs(x) * U
 
 
 def up(x):
     """Round a sum/difference result up."""
+    x = _max(x, -MAX_FLOAT)
     return x + _abs(x) * U
 
 
 def dnm(x):
     """Round a product/quotient/sqrt result down (covers underflow)."""
+    x = _min(x, MAX_FLOAT)
     return x - (_abs(x) * U + TINY)
 
 
 def upm(x):
     """Round a product/quotient/sqrt result up (covers underflow)."""
+    x = _max(x, -MAX_FLOAT)
     return x + (_abs(x) * U + TINY)
 
 
 def _dn_(x):
     """In-place :func:`dn` of a freshly computed array (or scalar) owned by the caller."""
+    if type(x) is np.ndarray:
+        _min(x, MAX_FLOAT, out=x)
+    else:
+        x = _min(x, MAX_FLOAT)
     t = _abs(x)
     t *= U
     x -= t
@@ -94,6 +136,10 @@ def _dn_(x):
 
 
 def _up_(x):
+    if type(x) is np.ndarray:
+        _max(x, -MAX_FLOAT, out=x)
+    else:
+        x = _max(x, -MAX_FLOAT)
     t = _abs(x)
     t *= U
     x += t
@@ -101,6 +147,10 @@ def _up_(x):
 
 
 def _dnm_(x):
+    if type(x) is np.ndarray:
+        _min(x, MAX_FLOAT, out=x)
+    else:
+        x = _min(x, MAX_FLOAT)
     t = _abs(x)
     t *= U
     t += TINY
@@ -109,6 +159,43 @@ def _dnm_(x):
 
 
 def _upm_(x):
+    if type(x) is np.ndarray:
+        _max(x, -MAX_FLOAT, out=x)
+    else:
+        x = _max(x, -MAX_FLOAT)
+    t = _abs(x)
+    t *= U
+    t += TINY
+    x += t
+    return x
+
+
+# The same without the overflow cap, for results that cannot overflow towards the side
+# being rounded (x + c with c <= 0, x * c with |c| <= 1, x / c with |c| >= 1): one numpy
+# call less on the hot path of constant operands.
+def _dn0_(x):
+    t = _abs(x)
+    t *= U
+    x -= t
+    return x
+
+
+def _up0_(x):
+    t = _abs(x)
+    t *= U
+    x += t
+    return x
+
+
+def _dnm0_(x):
+    t = _abs(x)
+    t *= U
+    t += TINY
+    x -= t
+    return x
+
+
+def _upm0_(x):
     t = _abs(x)
     t *= U
     t += TINY
@@ -118,11 +205,13 @@ def _upm_(x):
 
 def dnf(x):
     """Round a libm result down."""
+    x = _min(x, MAX_FLOAT)
     return x - (_abs(x) * REL_LIBM + ABS_LIBM)
 
 
 def upf(x):
     """Round a libm result up."""
+    x = _max(x, -MAX_FLOAT)
     return x + (_abs(x) * REL_LIBM + ABS_LIBM)
 
 
@@ -147,6 +236,15 @@ def _nan_where(mask, lo, hi):
         lo = _where(mask, np.nan, lo)
         hi = _where(mask, np.nan, hi)
     return lo, hi
+
+
+def _two_sided(lo, hi):
+    """[nan, nan] wherever lo <= hi fails: a NaN on either side (or an inverted result).
+
+    For operations whose lower bound carries every NaN of the lower operand bounds and the
+    upper bound every NaN of the upper ones (fmin, floor, ...), this makes a NaN met in any
+    operand bound a NaN on both sides."""
+    return _nan_where(~(lo <= hi), lo, hi)
 
 
 def _domain(xl, xh, dlo, dhi, lo, hi, open_lo=False, open_hi=False):
@@ -183,6 +281,11 @@ def _mono_dec(fn, xl, xh, rlo=-INF, rhi=INF):
 
 
 # ------------------------------------------------------------------------- arithmetic
+def _nan_pair(*args):
+    shape = np.broadcast(*args).shape
+    return np.full(shape, np.nan), np.full(shape, np.nan)
+
+
 def add(al, ah, bl, bh):
     return _dn_(al + bl), _up_(ah + bh)
 
@@ -192,13 +295,21 @@ def sub(al, ah, bl, bh):
 
 
 def addc(al, ah, c):
-    """x + c for a float constant c."""
-    return _dn_(al + c), _up_(ah + c)
+    """x + c for a float constant c (a non-finite c is not a real: [nan, nan])."""
+    if not _isfinite(c):
+        return _nan_pair(al, ah)
+    if c > 0:  # only the lower bound can overflow (to +inf)
+        return _dn_(al + c), _up0_(ah + c)
+    return _dn0_(al + c), _up_(ah + c)
 
 
 def csub(c, bl, bh):
     """c - x for a float constant c."""
-    return _dn_(c - bh), _up_(c - bl)
+    if not _isfinite(c):
+        return _nan_pair(bl, bh)
+    if c > 0:
+        return _dn_(c - bh), _up0_(c - bl)
+    return _dn0_(c - bh), _up_(c - bl)
 
 
 def neg(al, ah):
@@ -206,7 +317,9 @@ def neg(al, ah):
 
 
 def twice(al, ah):
-    return al + al, ah + ah  # exact (overflow gives inf, still sound)
+    # exact, except for overflow: an overflowed lower bound becomes MAX_FLOAT (the exact
+    # value is a real above it), an overflowed upper bound -MAX_FLOAT
+    return _min(al + al, MAX_FLOAT), _max(ah + ah, -MAX_FLOAT)
 
 
 def mul(al, ah, bl, bh):
@@ -225,19 +338,25 @@ def mul(al, ah, bl, bh):
 
 def mulc(al, ah, c):
     """x * c for a float constant c (exact real constant)."""
+    if not _isfinite(c):
+        return _nan_pair(al, ah)
+    small = -1.0 <= c <= 1.0  # |x * c| <= |x|: no overflow
     if c > 0:
+        if small:
+            return _dnm0_(al * c), _upm0_(ah * c)
         return _dnm_(al * c), _upm_(ah * c)
     if c < 0:
+        if small:
+            return _dnm0_(ah * c), _upm0_(al * c)
         return _dnm_(ah * c), _upm_(al * c)
-    shape = np.broadcast(al, ah).shape
-    if c == 0:  # 0 * x = 0 for every real x; NaN (possibly undefined) stays NaN
-        z = np.zeros(shape)
-        return _keep_nan(z, z.copy(), al, ah)
-    return np.full(shape, np.nan), np.full(shape, np.nan)
+    z = np.zeros(np.broadcast(al, ah).shape)  # c == 0: 0 * x = 0 for every real x
+    return _keep_nan(z, z.copy(), al, ah)  # NaN (possibly undefined) stays NaN
 
 
 def mulci(al, ah, cl, ch):
     """x * [cl, ch] for a constant interval of one sign (0 < cl <= ch or cl <= ch < 0)."""
+    if not (_isfinite(cl) and _isfinite(ch)):
+        return mul(al, ah, cl, ch)
     if cl > 0:
         return _dnm_(_min(al * cl, al * ch)), _upm_(_max(ah * cl, ah * ch))
     if ch < 0:
@@ -247,7 +366,6 @@ def mulci(al, ah, cl, ch):
 
 C_DN = 1.0 - 2.0 ** -51  # x * C_DN rounded is below x - ulp(x) for normal x >= 0
 C_UP = 1.0 + 2.0 ** -51
-MAX_FLOAT = float(np.finfo(float).max)
 
 
 def sq(al, ah):
@@ -285,16 +403,23 @@ def div(al, ah, bl, bh):
 
 def divc(al, ah, c):
     """x / c for a float constant c."""
+    if not _isfinite(c):
+        return _nan_pair(al, ah)
+    if c >= 1.0:  # |x / c| <= |x|: no overflow
+        return _dnm0_(al / c), _upm0_(ah / c)
+    if c <= -1.0:
+        return _dnm0_(ah / c), _upm0_(al / c)
     if c > 0:
         return _dnm_(al / c), _upm_(ah / c)
     if c < 0:
         return _dnm_(ah / c), _upm_(al / c)
-    shape = np.broadcast(al, ah).shape
-    return np.full(shape, np.nan), np.full(shape, np.nan)
+    return _nan_pair(al, ah)
 
 
 def cdiv(c, bl, bh):
     """c / x for a float constant c."""
+    if not _isfinite(c):
+        return _nan_pair(bl, bh)
     q1 = c / bl
     q2 = c / bh
     lo = _dnm_(_min(q1, q2))
@@ -351,12 +476,13 @@ def _sincos(fn, al, ah, max_off, min_off):
         lo = _max(dnf(_min(fl, fh)), -1.0)
         hi = _min(upf(_max(fl, fh)), 1.0)
     two_pi = 2.0 * PI_LO
-    big = (ah - al >= two_pi) | (_abs(al) > _SIN_SAFE) | (_abs(ah) > _SIN_SAFE)
+    # written so that NaN and infinite bounds count as "big" (the full range [-1, 1])
+    big = ~((ah - al < two_pi) & (_abs(al) <= _SIN_SAFE) & (_abs(ah) <= _SIN_SAFE))
     has_max = big | _contains_point(al, ah, max_off, two_pi)
     has_min = big | _contains_point(al, ah, min_off, two_pi)
-    hi = _where(has_max, _where(np.isnan(hi), np.nan, 1.0), hi)
-    lo = _where(has_min, _where(np.isnan(lo), np.nan, -1.0), lo)
-    return lo, hi
+    hi = _where(has_max, 1.0, hi)
+    lo = _where(has_min, -1.0, lo)
+    return _keep_nan(lo, hi, al, ah)  # sin of a possibly undefined value: possibly undefined
 
 
 def sin(al, ah):
@@ -369,8 +495,9 @@ def cos(al, ah):
 
 def tan(al, ah):
     lo, hi = _mono_inc(np.tan, al, ah)
-    pole = ((ah - al) >= PI_LO) | _contains_point(al, ah, 0.5 * PI_LO, PI_LO)
-    pole |= (_abs(al) > _SIN_SAFE) | (_abs(ah) > _SIN_SAFE)
+    # written so that NaN and infinite bounds count as "may contain a pole"
+    no_pole = (ah - al < PI_LO) & (_abs(al) <= _SIN_SAFE) & (_abs(ah) <= _SIN_SAFE)
+    pole = ~no_pole | _contains_point(al, ah, 0.5 * PI_LO, PI_LO)
     return _undefined_where(pole, lo, hi)
 
 
@@ -431,23 +558,23 @@ def fabs(al, ah):
 
 
 def fmin(al, ah, bl, bh):
-    return _min(al, bl), _min(ah, bh)
+    return _two_sided(_min(al, bl), _min(ah, bh))
 
 
 def fmax(al, ah, bl, bh):
-    return _max(al, bl), _max(ah, bh)
+    return _two_sided(_max(al, bl), _max(ah, bh))
 
 
 def floor(al, ah):
-    return np.floor(al), np.floor(ah)
+    return _two_sided(np.floor(al), np.floor(ah))
 
 
 def ceil(al, ah):
-    return np.ceil(al), np.ceil(ah)
+    return _two_sided(np.ceil(al), np.ceil(ah))
 
 
 def sign(al, ah):
-    return np.sign(al), np.sign(ah)
+    return _two_sided(np.sign(al), np.sign(ah))
 
 
 def copysign(al, ah, bl, bh):
@@ -494,7 +621,7 @@ def hypot(al, ah, bl, bh):
     with np.errstate(all="ignore"):
         lo = _max(dnf(np.hypot(xl, yl)), 0.0)
         hi = upf(np.hypot(xh, yh))
-    return lo, hi
+    return _two_sided(lo, hi)  # hypot(nan, inf) is inf
 
 
 def atan2(yl, yh, xl, xh):
@@ -533,7 +660,7 @@ def powi(al, ah, n: int):
         pl, ph = powi(al, ah, -n)
         return inv(pl, ph)
     if n % 2 == 1:
-        with np.errstate(all="ignore"):  # overflow: inf - inf is NaN (no information)
+        with np.errstate(all="ignore"):  # an overflowed bound is capped by dnf/upf
             return dnf(np.power(al, n)), upf(np.power(ah, n))
     ml, mh = fabs(al, ah)
     with np.errstate(all="ignore"):
@@ -545,6 +672,8 @@ def powi(al, ah, n: int):
 def powc(al, ah, c: float):
     """x**c for a real constant c (integer c uses :func:`powi`)."""
     c = float(c)
+    if not _isfinite(c):
+        return _nan_pair(al, ah)
     if c.is_integer() and abs(c) < 2 ** 31:
         return powi(al, ah, int(c))
     if c > 0:
@@ -577,7 +706,7 @@ def pow(al, ah, bl, bh):
             il, ih = powi(al_b[sel], ah_b[sel], int(v))
             lo[sel] = il
             hi[sel] = ih
-    return lo, hi
+    return _keep_nan(lo, hi, al, ah, bl, bh)
 
 
 # ------------------------------------------------------------------------- logic ops
@@ -644,12 +773,10 @@ def assign(al, ah):
 
 def hull(al, ah, bl, bh):
     """Interval hull of two intervals (not a CasADi op; used by the compiler)."""
-    return _min(al, bl), _max(ah, bh)
+    return _two_sided(_min(al, bl), _max(ah, bh))
 
 
 def intersect(al, ah, bl, bh):
     """Intersection; an empty intersection (which cannot happen for two sound enclosures of
     the same value) is reported as NaN (no information)."""
-    lo = _max(al, bl)
-    hi = _min(ah, bh)
-    return _nan_where(lo > hi, lo, hi)
+    return _two_sided(_max(al, bl), _min(ah, bh))

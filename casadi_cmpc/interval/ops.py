@@ -2,7 +2,9 @@
 
 Each function takes interval arrays of shape ``(..., 2)`` (e.g. ``(N, d, 2)`` batches) that
 broadcast against each other, and returns one array of the broadcast shape. Rounding and
-domain conventions are those of :mod:`casadi_cmpc.interval.arith`.
+domain conventions are those of :mod:`casadi_cmpc.interval.arith`; an operand interval with a
+NaN in either bound counts as ``[nan, nan]`` (possibly undefined), and every result is either
+``[nan, nan]`` or NaN-free with ``lo <= hi``, ``lo < +inf``, ``hi > -inf``.
 
 >>> import numpy as np, casadi_cmpc as cm
 >>> r = cm.interval.mul(np.array([-1.0, 2.0]), np.array([3.0, 4.0]))
@@ -32,9 +34,20 @@ _RENAMED = {"not_": "logical_not", "and_": "logical_and", "or_": "logical_or"}
 __all__ = _UNARY_NAMES + _BINARY_NAMES + list(_RENAMED.values()) + ["constpow", "powi"]
 
 
+def _operand(a) -> np.ndarray:
+    """An interval array with a NaN in either bound made NaN in both (the invariant of
+    :mod:`~casadi_cmpc.interval.arith`: "possibly undefined" carries no bound at all)."""
+    a = np.asarray(a, dtype=float)
+    bad = np.isnan(a).any(axis=-1)
+    if bad.any():
+        a = a.copy()
+        a[bad] = np.nan
+    return a
+
+
 def _unary(core: Callable) -> Callable:
     def f(a):
-        a = np.asarray(a, dtype=float)
+        a = _operand(a)
         with np.errstate(all="ignore"):
             lo, hi = core(a[..., 0], a[..., 1])
         return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
@@ -46,8 +59,8 @@ def _unary(core: Callable) -> Callable:
 
 def _binary(core: Callable) -> Callable:
     def f(a, b):
-        a = np.asarray(a, dtype=float)
-        b = np.asarray(b, dtype=float)
+        a = _operand(a)
+        b = _operand(b)
         with np.errstate(all="ignore"):
             lo, hi = core(a[..., 0], a[..., 1], b[..., 0], b[..., 1])
         return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
@@ -65,7 +78,7 @@ for _n in _BINARY_NAMES + ["and_", "or_"]:
 
 def constpow(a, c: float) -> np.ndarray:
     """``a ** c`` for a real constant ``c``; a has shape (..., 2)."""
-    a = np.asarray(a, dtype=float)
+    a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powc(a[..., 0], a[..., 1], c)
     return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
@@ -73,7 +86,7 @@ def constpow(a, c: float) -> np.ndarray:
 
 def powi(a, n: int) -> np.ndarray:
     """``a ** n`` for an integer ``n``; a has shape (..., 2)."""
-    a = np.asarray(a, dtype=float)
+    a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powi(a[..., 0], a[..., 1], n)
     return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
