@@ -154,8 +154,9 @@ class _Codegen:
             lo, hi = self.consts[ins[0]]
             if op == ca.OP_NEG:
                 lo, hi = -hi, -lo
-            elif op == ca.OP_TWICE:
-                lo, hi = 2.0 * lo, 2.0 * hi
+            elif op == ca.OP_TWICE:  # exact, but an overflow is only known to be huge
+                lo, hi = arith.twice(np.float64(lo), np.float64(hi))
+                lo, hi = float(lo), float(hi)
             self.consts[out] = (lo, hi)
             return True
         return False
@@ -601,10 +602,11 @@ class InclusionFunction:
 
 def _sanitize(out: np.ndarray) -> None:
     """Replace results with a NaN in either bound ("possibly undefined, no information") by
-    the whole line ``[-inf, inf]`` (both bounds), in place."""
-    nan = np.isnan(out)
-    if nan.any():
-        out[nan.any(axis=-1)] = (-np.inf, np.inf)
+    the whole line ``[-inf, inf]`` (both bounds), in place; also ``lo > hi``, which no sound
+    enclosure gives. (A constant infinite output, e.g. ``casadi.inf``, stays ``[inf, inf]``.)"""
+    bad = ~(out[..., 0] <= out[..., 1])  # True where either bound is NaN
+    if bad.any():
+        out[bad] = (-np.inf, np.inf)
 
 
 # Relative widening of constants that CasADi may have folded while differentiating (it folds
