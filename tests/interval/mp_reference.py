@@ -317,14 +317,17 @@ class _Undef:
 UNDEF = _Undef()
 
 
-def eval_function(fun: ca.Function, inputs: list[list]) -> list[list]:
+def eval_function(fun: ca.Function, inputs: list[list], ops: dict | None = None) -> list[list]:
     """Exact values of the outputs of an SX Function at one point.
 
     ``inputs[i]`` lists the (dense, column-major) entries of input ``i`` (floats or mpf).
     Returns, per output, the list of its non-zeros as mpf, or ``UNDEF`` where the graph
     evaluates an operation outside its domain (``if_else_zero(0, undefined)`` is 0, as in
-    CasADi).
+    CasADi). A NaN constant is CasADi's folded value of an operation outside its domain
+    (``log(-2.5)``), so it is ``UNDEF`` too. ``ops`` replaces the semantics of some
+    operation codes (default: this module's).
     """
+    table = _OPS if ops is None else {**_OPS, **ops}
     work: dict[int, object] = {}
     outs = [[None] * fun.nnz_out(i) for i in range(fun.n_out())]
     for k in range(fun.n_instructions()):
@@ -332,13 +335,14 @@ def eval_function(fun: ca.Function, inputs: list[list]) -> list[list]:
         ins = list(fun.instruction_input(k))
         o = list(fun.instruction_output(k))
         if op == ca.OP_CONST:
-            work[o[0]] = F(fun.instruction_constant(k))
+            v = float(fun.instruction_constant(k))
+            work[o[0]] = UNDEF if math.isnan(v) else F(v)
         elif op == ca.OP_INPUT:
             work[o[0]] = F(inputs[ins[0]][ins[1]])
         elif op == ca.OP_OUTPUT:
             outs[o[0]][o[1]] = work[ins[0]]
         else:
-            fn = _OPS[op]
+            fn = table[op]
             args = [work[i] for i in ins[: (1 if op in _UNARY_OPS else 2)]]
             if op == ca.OP_IF_ELSE_ZERO and args[0] is not UNDEF and args[0] == 0:
                 work[o[0]] = ZERO
