@@ -460,9 +460,13 @@ def test_sum_of_nonnegative_is_nonnegative(a, b):
 @given(bs=boxes([0.0]))
 def test_sign_definite_results(bs):
     al, ah = _arrays(bs)
-    # (a NaN bound, e.g. the lower bound of an overflowed square, is not a negative bound)
+    # (a NaN bound, "possibly undefined", is not a negative bound; an overflowed square
+    # has the finite lower bound MAX_FLOAT, not NaN)
     with np.errstate(invalid="ignore"):
         assert not np.any(A.sq(al, ah)[0] < 0.0)
+        assert not np.any(np.isnan(A.sq(al, ah)[0]))
+        assert not np.any(np.isnan(A.powi(al, ah, 4)[0]))
+        assert not np.any(np.isnan(A.exp(al, ah)[0]))
         assert np.all(A.fabs(al, ah)[0] >= 0.0)
         assert not np.any(A.powi(al, ah, 4)[0] < 0.0)
         assert not np.any(A.hypot(al, ah, ah, al)[0] < 0.0)

@@ -11,6 +11,7 @@ contain it, inner rounding must be contained in it.
 from __future__ import annotations
 
 import itertools
+import math
 from fractions import Fraction
 
 import casadi as ca
@@ -523,3 +524,43 @@ def test_semantic_extension_errors():
     with pytest.raises(ValueError, match="non-negative"):
         ext.bounds(arr([[[0.0, 1.0]]]), arr([[[0.0, 1.0]]]), splits=(-1, 0))
 
+
+
+# ------------------------------------------------------------- overflow is not NaN
+_HUGE_IVS = [(710.0, 711.0), (711.0, 710.0), (1e200, 1e201), (1e201, 1e200),
+             (-1e201, -1e200), (-1e200, -1e201), (1e308, 1.7976931348623157e308)]
+
+
+@pytest.mark.parametrize("X", _HUGE_IVS)
+def test_overflow_gives_finite_bounds_not_nan(X):
+    """An overflowed bound is a real beyond the float range: outer rounding keeps a finite
+    bound on the inner side of it (never NaN, never an infinite lower bound +inf), inner
+    rounding stays inside the exact result."""
+    mpmath.mp.prec = 200
+    x = arr(X)
+    cases = [(lambda r: M.kaucher_sq(x, r), lambda v: v * v, (0.0,)),
+             (lambda r: M.kaucher_powi(x, 3, r), lambda v: v ** 3, ()),
+             (lambda r: M.kaucher_powi(x, 4, r), lambda v: v ** 4, (0.0,))]
+    if abs(x).max() < 1e3:
+        cases += [(lambda r: M.kaucher_monotone(x, "exp", rounding=r), mpmath.exp, ()),
+                  (lambda r: M.kaucher_monotone(x, "sinh", rounding=r), mpmath.sinh, ())]
+    for fn, ref, crit in cases:
+        exact = _unary_semantic(ref, tuple(x), crit)
+        out, inn = fn("outer"), fn("inner")
+        assert not np.isnan(out).any() and not np.isnan(inn).any(), (X, out, inn)
+        assert _mp_bracket(out, exact, inner=False), (X, out)
+        assert _mp_bracket(inn, exact, inner=True), (X, inn)
+    y = arr((X[0] * 0.5, X[1] * 0.5))
+    out = M.kaucher_mul(x, y, "outer")
+    assert not np.isnan(out).any(), (X, out)
+
+
+def test_semantic_extension_of_an_overflowing_composite():
+    """tan(fmin(exp(x0), x1)) on [710, 711] x [1, 2]: exp overflows, fmin is x1, tan has a
+    pole in [1, 2]. The outer approximation must contain every value (it was [-inf, -2.19],
+    which misses tan(1.5) = 14.1)."""
+    x0, x1 = ca.SX.sym("x0"), ca.SX.sym("x1")
+    ext = M.SemanticExtension(ca.Function("f", [x0, x1], [ca.tan(ca.fmin(ca.exp(x0), x1))]))
+    out = ext.outer(np.array([[[710.0, 711.0]]]), np.array([[[1.0, 2.0]]]))[0, 0]
+    for v in (math.tan(1.0), math.tan(1.5), math.tan(2.0)):
+        assert out[0] <= v <= out[1], out
