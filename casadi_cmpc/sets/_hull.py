@@ -13,6 +13,7 @@ so the hull contains every input point exactly.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from types import ModuleType
 
@@ -25,6 +26,10 @@ __all__: list[str] = []
 #: Relative tolerance for the numerical rank of a point cloud, relative to its spread
 #: (largest singular value of the differences): translation and scale invariant.
 RANK_RTOL = 1e-12
+#: Points whose thickness (a singular value of their differences) is below
+#: ``FLAT_ULPS * 2**-53 * sqrt(N) * max |p|`` (about the rounding of their coordinates)
+#: are flat, whatever their spread.
+FLAT_ULPS = 2
 _U = 2.0 ** -53
 
 
@@ -69,21 +74,27 @@ def dot_upper(P: np.ndarray, A: np.ndarray) -> np.ndarray:
     return b
 
 
-def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL
+def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL, max_rank: int | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Affine hull of points.
 
-    The rank is read from the singular values of the differences ``p_i - mean``
-    relative to the largest one (translation and scale invariant): ``s_k > rtol s_1``.
+    The differences are taken to one of the points (the one nearest to their mean), so
+    they carry relative rounding errors only: a common translation of the points does not
+    change them (the rounding error of a mean far from the origin would add a spurious
+    direction). The rank is read from their singular values relative to the largest one
+    (translation and scale invariant), ``s_k > rtol s_1``, and is at most ``N - 1`` for
+    ``N`` distinct points (and at most ``max_rank`` when given).
 
     Parameters
     ----------
     points : ndarray, shape (N, n)
+    rtol : float
+    max_rank : int, optional
 
     Returns
     -------
     origin : ndarray, shape (n,)
-        The mean of the points.
+        One of the points (exactly).
     U : ndarray, shape (n, r)
         Orthonormal basis of the directions of the hull (``r`` its dimension).
     N : ndarray, shape (n, n - r)
@@ -91,12 +102,25 @@ def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL
     """
     P = np.asarray(points, dtype=float)
     n = P.shape[1]
-    origin = P.mean(axis=0)
-    D = P - origin
-    if P.shape[0] <= 1 or not np.any(P != P[0]):
+    if P.shape[0] == 0:
+        return np.zeros(n), np.zeros((n, 0)), np.eye(n)
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = P.mean(axis=0)
+        dist = np.abs(P - mean).max(axis=1)
+    k0 = int(np.argmin(np.where(np.isfinite(dist), dist, np.inf)))
+    origin = P[k0].copy()
+    if P.shape[0] <= 1 or not np.any(P != origin):
         return origin, np.zeros((n, 0)), np.eye(n)
+    D = P - origin
+    # scale first: differences of huge coordinates must not overflow inside the SVD
+    dmax = float(np.abs(D).max())
+    D = D / dmax
     _, s, Vt = np.linalg.svd(D, full_matrices=True)
-    r = max(1, int(np.sum(s > rtol * s[0])))
+    n_distinct = np.unique(P, axis=0).shape[0]
+    # thickness at the rounding level of the coordinates themselves is no dimension
+    floor = FLAT_ULPS * _U * math.sqrt(P.shape[0]) * float(np.abs(P).max()) / dmax
+    r = max(1, int(np.sum(s > max(rtol * s[0], floor))))
+    r = min(r, n_distinct - 1, n if max_rank is None else max(1, int(max_rank)))
     return origin, Vt[:r].T.copy(), Vt[r:].T.copy()
 
 
@@ -113,14 +137,19 @@ def _qhull(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     from scipy.spatial import ConvexHull, QhullError
 
     Z = Z / max(float(np.abs(Z).max()), 1e-300)
+    if Z.shape[0] <= Z.shape[1]:
+        raise SolverError(f"Qhull needs at least {Z.shape[1] + 1} points in {Z.shape[1]}-D "
+                          f"to build a simplex; got {Z.shape[0]}")
     try:
         h = ConvexHull(Z)
-    except QhullError:
+    except (QhullError, ValueError):
         try:
             h = ConvexHull(Z, qhull_options="QJ")
-        except QhullError as exc:  # pragma: no cover - Qhull failing twice is exceptional
+        except (QhullError, ValueError) as exc:
             raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
     normals = h.equations[:, :-1]
+    if not np.isfinite(normals).all():
+        raise SolverError("Qhull returned non-finite facet normals")
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
     return _merge_rows(normals), np.asarray(h.vertices, dtype=np.int64)
 
@@ -135,21 +164,24 @@ def _polygon_normals(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     from scipy.spatial import ConvexHull, QhullError
 
-    Z = P - P.mean(axis=0)  # the combinatorics only: translation and scale invariant
+    Z = P - P[0]  # the combinatorics only: translation and scale invariant
     Z = Z / max(float(np.abs(Z).max()), 1e-300)
     try:
         h = ConvexHull(Z)
-    except QhullError:
+    except (QhullError, ValueError):
         try:
             h = ConvexHull(Z, qhull_options="QJ")
-        except QhullError as exc:  # pragma: no cover - full rank checked before
+        except (QhullError, ValueError) as exc:
             raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
-    c = P[h.vertices].mean(axis=0)
+    Hv = P[h.vertices]
     rows = []
     for i, j in h.simplices:
         p, q = P[i], P[j]
         nrm = np.array([q[1] - p[1], p[0] - q[0]])
-        if np.dot(nrm, c - p) > 0:
+        # orientation from the hull vertex farthest from the edge's line (differences of
+        # input points, not a rounded centre: thin polygons far away keep their sign)
+        side = (Hv - p) @ nrm
+        if side[int(np.argmax(np.abs(side)))] > 0:
             nrm = -nrm
         rows.append(nrm / np.hypot(nrm[0], nrm[1]))
     A = np.unique(np.array(rows), axis=0)
@@ -163,7 +195,9 @@ def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     :func:`affine_hull`). A hull found flat (``r < n``) gets the pairs of rows ``±v`` of
     the normals of its affine hull; when the points are flat only up to the rank
     tolerance, these pairs are a slab as thick as the points (an outer description), and
-    every input point that is extreme in the flat hull is returned as a vertex.
+    every input point that is extreme in the flat hull is returned as a vertex. When
+    Qhull fails on a nearly degenerate cloud, ``r`` is lowered by one (the same outer
+    description, one dimension flatter) until it succeeds.
 
     Parameters
     ----------
@@ -186,27 +220,48 @@ def hull_hrep(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if r == 0:
         A = np.vstack([np.eye(n), -np.eye(n)])
         return A, dot_upper(P, A), P[:1].copy()
-    Z = (P - origin) @ U
-    if r == n == 2:
-        A, vidx = _polygon_normals(P)
-        return A, dot_upper(P, A), P[np.sort(vidx)]
-    if r == n:  # full-dimensional: no rotation (keeps axis-aligned facets exact)
-        U = np.eye(n)
-        A_sub, vidx = _qhull(P - origin)
-    elif r == 1:
-        z = Z[:, 0]
-        A_sub = np.array([[1.0], [-1.0]])
-        vidx = np.unique([int(np.argmax(z)), int(np.argmin(z))])
-    else:
-        A_sub, vidx = _qhull(Z)
+    while True:
+        try:
+            A_sub, vidx, U = _hull_in_flat(P, origin, U)
+            break
+        except SolverError:
+            # Qhull gave up on a nearly degenerate cloud: describe it as one dimension
+            # flatter, with a slab as thick as the points (outward, contains every point)
+            if r <= 1:  # pragma: no cover - the 1-D hull needs no Qhull
+                raise
+            r -= 1
+            origin, U, Nc = affine_hull(P, max_rank=r)
+    if U is None:  # full-dimensional polygon: rows built from the edges
+        return A_sub, dot_upper(P, A_sub), P[np.sort(vidx)]
     A = A_sub @ U.T
-    if Nc.shape[1]:
+    if Nc.shape[1] and U.shape[1] < n:
         A = np.vstack([A, Nc.T, -Nc.T])
     A = A / np.linalg.norm(A, axis=1, keepdims=True)
     # exact axis directions stay exact (their rows then describe the flat exactly)
     A = np.where(np.abs(A) < 1e-15, 0.0, A)
     A = A / np.linalg.norm(A, axis=1, keepdims=True)
     return A, dot_upper(P, A), P[np.sort(vidx)]
+
+
+def _hull_in_flat(P: np.ndarray, origin: np.ndarray, U: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Facet normals (in the coordinates of U) and vertex indices of the hull of P in
+    its affine hull ``origin + span(U)``; U is returned (the identity when ``r = n``,
+    None for a full-dimensional polygon, whose rows are in R^2 already)."""
+    n, r = P.shape[1], U.shape[1]
+    if r == n == 2:
+        A, vidx = _polygon_normals(P)
+        return A, vidx, None
+    if r == n:  # full-dimensional: no rotation (keeps axis-aligned facets exact)
+        A_sub, vidx = _qhull(P - origin)
+        return A_sub, vidx, np.eye(n)
+    Z = (P - origin) @ U
+    if r == 1:
+        z = Z[:, 0]
+        return (np.array([[1.0], [-1.0]]),
+                np.unique([int(np.argmax(z)), int(np.argmin(z))]), U)
+    A_sub, vidx = _qhull(Z)
+    return A_sub, vidx, U
 
 
 def halfspace_vertices(A: np.ndarray, b: np.ndarray, interior: np.ndarray) -> np.ndarray:
@@ -224,7 +279,7 @@ def halfspace_vertices(A: np.ndarray, b: np.ndarray, interior: np.ndarray) -> np
     ndarray, shape (k, n)
         The extreme points of the intersection.
     """
-    from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
+    from scipy.spatial import HalfspaceIntersection, QhullError
 
     c = np.asarray(interior, dtype=float)
     bs = b - A @ c
@@ -235,11 +290,13 @@ def halfspace_vertices(A: np.ndarray, b: np.ndarray, interior: np.ndarray) -> np
     except (QhullError, ValueError) as exc:
         raise SolverError(f"Qhull could not intersect the half-spaces: {exc}") from exc
     pts = pts[np.isfinite(pts).all(axis=1)]
-    if pts.shape[0] > A.shape[1] + 1 and A.shape[1] > 1:
-        try:
-            pts = pts[np.sort(ConvexHull(pts).vertices)]
-        except QhullError:
-            pass
+    # Each intersection is the vertex of one facet of the dual hull, so every point is
+    # extreme; a degenerate vertex (more than n active rows) comes once per dual facet.
+    # Merge the copies (in the scaled coordinates, where the polytope has size ~1) instead
+    # of a convex hull of them, which is very slow in higher dimensions.
+    if pts.shape[0] > 1:
+        _, idx = np.unique(np.round(pts * 1e12), axis=0, return_index=True)
+        pts = pts[np.sort(idx)]
     return pts * scale + c
 
 
