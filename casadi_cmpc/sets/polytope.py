@@ -10,13 +10,23 @@ Numerics
   subset tests and the exact "box inside a union" test solve LPs with HiGHS
   (``scipy.optimize.linprog(method="highs")``, feasibility tolerances ``1e-10``) on the
   rows scaled to unit Euclidean norm, and decide with the tolerance
-  ``tol = 1e-9 * max(1, max |b_i| / ||a_i||)`` (a distance in the units of ``x``).
+  ``tol = 1e-9 * s`` (a distance in the units of ``x``). The LPs run in coordinates
+  ``z = (x - c0) / s`` shifted to a reference point of the polytope and scaled to its
+  extent; the offsets ``b - A c0`` are computed in doubled precision and rounded outward,
+  so a thin set far from the origin stays feasible. An LP that HiGHS cannot solve is
+  retried on rows relaxed by the tolerance; where it still fails, the box tests return
+  the safe answer and :meth:`Polytope.bounding_box` an outward box (multipliers of
+  relaxed LPs are admissible certificates: they are checked exactly).
 * **V/H conversions run in floating point.** ``pycddlib-standalone`` provides cddlib's
   float arithmetic only (no GMP fractions); vertex enumeration uses cddlib (the
   vertices are checked against the inequalities afterwards), convex hulls use Qhull,
-  and the right-hand sides of every hull are recomputed from the points
-  (``b_k = max_i a_k.v_i``), so a hull always contains its input points up to the
-  rounding of that evaluation.
+  and the right-hand sides of every hull are recomputed from the points and rounded
+  upward (``b_k >= max_i a_k.v_i`` exactly), so a hull always contains its input points.
+  The affine dimension of a point cloud is the numerical rank of the differences to one
+  of its points (translation invariant), at most ``N - 1`` for ``N`` points; a cloud
+  thinner than ``1e-12`` of its spread or than the rounding of its coordinates is flat
+  and gets a slab as thick as the points (outward). When Qhull gives up on a nearly
+  degenerate cloud, the cloud is described as one dimension flatter the same way.
 """
 
 from __future__ import annotations
@@ -65,7 +75,8 @@ class _Rows(NamedTuple):
     tol: float  # heuristic tolerance RTOL * s (a distance in the units of x)
     c0: np.ndarray  # (n,) reference point
     s: float  # scale > 0
-    bz: np.ndarray  # (bn - An c0) / s
+    bz: np.ndarray  # (bn - An c0) / s, rounded outward (for the LPs)
+    bz0: np.ndarray  # (bn - An c0) / s, rounded to nearest (for vertex enumeration)
 
 
 def _gamma(k: int) -> float:
@@ -297,10 +308,25 @@ class Polytope(SetBase):
         with np.errstate(over="ignore", invalid="ignore"):
             dev = np.abs(bn - An @ c0)
             scale = float(dev.max(initial=0.0))
+            if "vertices" in self._cache and len(self._cache["vertices"]):
+                # the extent of the set, not only the offsets of its rows (a sliver
+                # has rows through its centre)
+                ext = np.abs(np.asarray(self._cache["vertices"], dtype=float) - c0)
+                scale = max(scale, float(ext.max(initial=0.0)))
         if not np.isfinite(scale) or scale <= 0.0:
             scale = 1.0
-        bz = (bn - An @ c0) / scale
-        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz)
+        # b - A c0 in doubled precision (far from the origin its plain rounding error
+        # exceeds the thickness of a thin set); bz is rounded outward: every point of the
+        # stored rows' set satisfies the scaled rows up to the rounding of a.z
+        with np.errstate(over="ignore", invalid="ignore"):
+            res, res_err = _residual(A_k, b_k, c0)
+            bz0 = res / nk / scale
+            slack = (_gamma(n + 4) * (np.abs(bz0) + np.abs(An).sum(axis=1))
+                     + res_err / nk / scale * (1 + 4 * _U))
+            bz = bz0 + slack
+            bz = np.where(np.isfinite(bz), bz, (bn - An @ c0) / scale)
+            bz0 = np.where(np.isfinite(bz0), bz0, bz)
+        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz, bz0)
         self._cache["rows"] = r
         return r
 
@@ -463,23 +489,59 @@ class Polytope(SetBase):
                 f"{what} needs a bounded polytope; this one is unbounded "
                 "(intersect it with a Box first)")
 
-    def _max_lp(self, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _max_lp(self, D: np.ndarray, multipliers_only: bool = False
+                ) -> tuple[np.ndarray, np.ndarray]:
         """``max d.x`` over the polytope for each row of D (K, n): values and maximisers.
 
         Solved in the scaled coordinates ``z`` of :class:`_Rows` (translation and scale
         invariant); the LP multipliers of the unit rows are kept in ``self._last_y``.
+        An LP that HiGHS cannot solve is solved again on the rows relaxed by the decision
+        tolerance (values up to ``tol`` too large). With ``multipliers_only`` (the
+        multipliers serve as certificates that are checked exactly, so any ``y >= 0``
+        is admissible) larger relaxations are tried too, and LPs that still fail get
+        NaN values and multipliers instead of an error.
         """
         R = self._rows()
         K, n = D.shape
         m = R.An.shape[0]
-        res = _lp.block_lp(-D, np.tile(R.An, (K, 1)), np.tile(R.bz, K),
+        res = _lp.block_lp(-D, np.tile(R.An, (K, 1)), np.tile(R.bz0, K),
                            np.repeat(np.arange(K), m))
-        _lp.check_status(res.status, "a support function")
-        vals = -res.fun * R.s + D @ R.c0
-        vals[res.status == _lp.UNBOUNDED] = np.inf
-        vals[res.status == _lp.INFEASIBLE] = -np.inf
-        X = R.c0 + R.s * res.x
-        self._last_y = res.y.reshape(K, m) if m else np.zeros((K, 0))
+        status, fun = res.status.copy(), res.fun.copy()
+        Xz = res.x.copy()
+        Y = res.y.reshape(K, m).copy() if m else np.zeros((K, 0))
+        bounded = self._cache.get("bounded") is True
+        relax = (0.0, RTOL, 1e-6, 1e-3) if multipliers_only else (0.0, RTOL)
+        for k, eps in enumerate(relax):
+            # first retry: the rows rounded outward (a thin set that rounding made
+            # infeasible); then relaxed by a tolerance
+            bad = (status == _lp.NUMERICAL) | (bounded & (status == _lp.UNBOUNDED))
+            if k == 0:
+                bad |= status == _lp.INFEASIBLE
+            redo = np.flatnonzero(bad)
+            if redo.size == 0:
+                break
+            r2 = _lp.block_lp(-D[redo], np.tile(R.An, (redo.size, 1)),
+                              np.tile(R.bz + eps, redo.size), np.repeat(np.arange(redo.size), m))
+            ok = r2.status == _lp.OPTIMAL
+            if k == 0:
+                keep = r2.status == _lp.INFEASIBLE
+                status[redo[keep]] = _lp.INFEASIBLE
+                fun[redo[keep]] = np.inf
+            status[redo[ok]] = _lp.OPTIMAL
+            fun[redo[ok]] = r2.fun[ok]
+            Xz[redo[ok]] = r2.x[ok]
+            if m:
+                Y[redo[ok]] = r2.y.reshape(redo.size, m)[ok]
+        failed = (status == _lp.NUMERICAL) | (bounded & (status == _lp.UNBOUNDED))
+        if not multipliers_only:
+            _lp.check_status(np.where(failed, _lp.NUMERICAL, status), "a support function")
+        vals = -fun * R.s + D @ R.c0
+        vals[status == _lp.UNBOUNDED] = np.inf
+        vals[status == _lp.INFEASIBLE] = -np.inf
+        vals[failed] = np.nan
+        X = R.c0 + R.s * Xz
+        Y[failed] = np.nan
+        self._last_y = Y
         return vals, X
 
     def _support_upper(self, D: np.ndarray) -> np.ndarray:
@@ -503,7 +565,7 @@ class Polytope(SetBase):
         R = self._rows()
         K, n = D.shape
         E = np.vstack([np.eye(n), -np.eye(n)])
-        self._max_lp(np.vstack([E, D]))
+        self._max_lp(np.vstack([E, D]), multipliers_only=True)
         Y = np.asarray(self._last_y, dtype=float)
         norms = np.linalg.norm(R.A, axis=1)
         Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0) / norms
@@ -585,21 +647,35 @@ class Polytope(SetBase):
             raise EmptySetError("an empty polytope has no bounding box")
         n = self.dim
         E = np.vstack([np.eye(n), -np.eye(n)])
-        if self.is_bounded() and self._rows().An.shape[0]:
+        try:
+            bounded = self.is_bounded()
+        except SolverError:
+            bounded = None  # undecided: the LP values below tell
+        if bounded is not False and self._rows().An.shape[0]:
             h = self._support_upper(E)
-            if "vertices" in self._cache:  # from_vertices: the H-rep contains the points
+            if not np.isfinite(h).all() and "vertices" in self._cache:
+                # from_vertices: the rows describe the hull of the points up to rounding
                 hv = np.asarray(self.support(E))
                 with np.errstate(invalid="ignore"):
                     hv = hv + (1e-12 * np.abs(hv) + 4 * np.abs(np.spacing(hv)))
                 h = np.where(np.isfinite(h), h, hv)
+            if not np.isfinite(h).all():
+                h = np.where(np.isfinite(h), h, self._support_lp_outward(E))
         else:
-            h = np.asarray(self.support(E), dtype=float)
-            with np.errstate(invalid="ignore"):
-                h = h + (1e-12 * np.abs(h) + 4 * np.abs(np.spacing(h)))
+            h = self._support_lp_outward(E)
         hi, lo = h[:n], -h[n:]
         hi = np.where(np.isnan(hi), np.inf, hi)
         lo = np.where(np.isnan(lo), -np.inf, lo)
         return Box(np.minimum(lo, hi), hi)
+
+    def _support_lp_outward(self, E: np.ndarray) -> np.ndarray:
+        """LP values of the support function in the directions E, widened outward by
+        ``1e-12`` relative (``+inf`` where unbounded or where no LP could be solved)."""
+        vals, _ = self._max_lp(E, multipliers_only=True)
+        h = np.where(np.isnan(vals), np.inf, vals)
+        with np.errstate(invalid="ignore"):
+            h = h + (1e-12 * np.abs(h) + 4 * np.abs(np.spacing(h)))
+        return np.where(np.isnan(h), np.inf, h)
 
     def vertices(self) -> np.ndarray:
         """Vertices of the bounded polytope.
@@ -628,9 +704,17 @@ class Polytope(SetBase):
             return V.copy()
         self._require_bounded_nonempty("the vertex list")
         R = self._rows()
+        V = None
         if _hull._cdd() is not None:
-            V = R.c0 + R.s * _hull.cdd_vertices(R.An, R.bz)
-        else:
+            # rows rounded to nearest, then outward (a thin set far from the origin may
+            # lose its thickness to rounding), then the LP route
+            for bz in (R.bz0, R.bz):
+                try:
+                    V = R.c0 + R.s * _hull.cdd_vertices(R.An, bz)
+                    break
+                except (EmptySetError, SolverError):
+                    continue
+        if V is None:
             V = self._vertices_fallback()
         V = _dedupe(V, R.tol)
         res = V @ R.An.T - R.bn
@@ -776,21 +860,28 @@ class Polytope(SetBase):
             return self._cache["sat"]
         n = self.dim
         sat = None
-        if n in (2, 3) and not self.is_empty() and self.is_bounded() \
-                and self.is_full_dimensional():
-            R = self._rows()
-            rows, rhs = [R.A], [R.b]
-            for k in range(1, n):
-                for T in itertools.combinations(range(n), k):
-                    Q = self.project(list(T), method="support")
-                    QR = Q._rows()
-                    lifted = np.zeros((QR.A.shape[0], n))
-                    lifted[:, list(T)] = QR.A
-                    h = self._support_upper(lifted)
-                    ok = np.isfinite(h)
-                    rows.append(lifted[ok])
-                    rhs.append(h[ok])
-            sat = BoxKernel(np.vstack(rows), np.concatenate(rhs))
+        try:
+            if n in (2, 3) and not self.is_empty() and self.is_bounded() \
+                    and self.is_full_dimensional():
+                R = self._rows()
+                rows, rhs = [R.A], [R.b]
+                for k in range(1, n):
+                    for T in itertools.combinations(range(n), k):
+                        Q = self.project(list(T), method="support")
+                        QR = Q._rows()
+                        lifted = np.zeros((QR.A.shape[0], n))
+                        lifted[:, list(T)] = QR.A
+                        h = self._support_upper(lifted)
+                        ok = np.isfinite(h)
+                        if not ok.all():
+                            # a missing direction would make "not separated" no proof of
+                            # intersection: use the general stages instead
+                            raise SolverError("no rigorous offset for a projection facet")
+                        rows.append(lifted)
+                        rhs.append(h)
+                sat = BoxKernel(np.vstack(rows), np.concatenate(rhs))
+        except SolverError:
+            sat = None  # the general stages of intersects_box decide (conservatively)
         self._cache["sat"] = sat
         return sat
 
@@ -850,7 +941,7 @@ class Polytope(SetBase):
         if self.is_empty():
             return Polytope.empty(n)
         R = self._rows()
-        A, b, An, bn, tol = R.A, R.b, R.An, R.bz, RTOL
+        A, b, An, bn, tol = R.A, R.b, R.An, R.bz0, RTOL
         m = An.shape[0]
         # exact duplicate normals: keep the smallest right-hand side
         order = np.lexsort((bn, *An.T[::-1]))
@@ -1413,6 +1504,34 @@ def _prune_rows(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros((1, A.shape[1])), np.array([-1.0])
     M = P.minimal()
     return np.array(M.A), np.array(M.b)
+
+
+def _residual(A: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``b - A c`` row by row in doubled precision (error-free products and sums), and a
+    bound of its error (the rounding to double plus the second-order terms)."""
+    from ._boxkernel import _two_prod
+
+    m, n = A.shape
+    if m == 0:
+        return np.zeros(0), np.zeros(0)
+    P, E, ok = _two_prod(A, np.broadcast_to(c, A.shape))
+    terms = np.hstack([b[:, None], -P, -E])
+    s = np.zeros(m)
+    e = np.zeros(m)
+    for j in range(terms.shape[1]):  # TwoSum accumulation (Ogita-Rump-Oishi Sum2)
+        t = terms[:, j]
+        x = s + t
+        z = x - s
+        e += (s - (x - z)) + (t - z)
+        s = x
+    res = s + e
+    mag = np.abs(b) + np.abs(P).sum(axis=1) + np.abs(E).sum(axis=1)
+    err = _U * np.abs(res) + 2 * _gamma(2 * n + 2) ** 2 * mag + 1e-300
+    plain = ~ok.all(axis=1)
+    if plain.any():  # products outside Dekker's range: the plain evaluation and its bound
+        res[plain] = b[plain] - A[plain] @ c
+        err[plain] = _gamma(n + 2) * (np.abs(b[plain]) + np.abs(A[plain]) @ np.abs(c)) + 1e-300
+    return res, err
 
 
 def _frac_up(v: Fraction) -> float:
