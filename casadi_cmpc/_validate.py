@@ -11,6 +11,38 @@ from .exceptions import DimensionError, EmptySetError, InvalidBoundsError
 __all__: list[str] = []
 
 
+def _first_string(data: Any) -> Any:
+    """The first str/bytes element of a (nested) sequence or array, else None."""
+    if isinstance(data, (str, bytes, np.str_, np.bytes_)):
+        return data
+    if isinstance(data, np.ndarray):
+        if data.dtype.kind in "US":
+            return data.ravel()[0] if data.size else None
+        if data.dtype.kind != "O":
+            return None
+        data = data.ravel().tolist()
+    if isinstance(data, (list, tuple)):
+        for x in data:
+            found = _first_string(x)
+            if found is not None:
+                return found
+    return None
+
+
+def as_float_array(data: Any, name: str) -> np.ndarray:
+    """``np.asarray(data, dtype=float)`` that refuses strings (also numeric ones: a string
+    is not a number) and names the argument when the conversion fails."""
+    s = _first_string(data)
+    if s is not None:
+        raise InvalidBoundsError(
+            f"{name} must be numbers; got the string {str(s)!r} (write numbers, e.g. 1.5, "
+            "not '1.5')")
+    try:
+        return np.asarray(data, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InvalidBoundsError(f"{name} must be an array of numbers; {exc}") from exc
+
+
 def as_boxes(data: Any, d: int | None = None, name: str = "X", *,
              allow_empty: bool = False) -> np.ndarray:
     """Return a float array of shape ``(N, d, 2)`` from boxes given in any accepted form.

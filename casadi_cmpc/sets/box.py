@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_boxes, as_points
+from .._validate import _first_string, as_boxes, as_float_array, as_points
 from ..exceptions import DimensionError, EmptySetError, InvalidBoundsError
 from .base import SetBase
 
@@ -33,9 +33,16 @@ class Box(SetBase):
     """
 
 
-    def __init__(self, lo: Any, hi: Any) -> None:
-        lo_a = np.atleast_1d(np.asarray(lo, dtype=float)).copy()
-        hi_a = np.atleast_1d(np.asarray(hi, dtype=float)).copy()
+    def __init__(self, lo: Any, hi: Any = None) -> None:
+        if hi is None:
+            shape = np.shape(lo) if _first_string(lo) is None else "?"
+            raise TypeError(
+                "Box(lo, hi) takes the lower and the upper bounds as two arguments; got one "
+                f"argument of shape {shape}. For an array of [lo, hi] rows (shape (d, 2), "
+                "as returned by as_array()) use cm.Box.from_array(arr) or cm.Box(*arr.T); "
+                "for an array [lo, hi] of shape (2, d) use cm.Box(*arr)")
+        lo_a = np.atleast_1d(as_float_array(lo, "Box lo")).copy()
+        hi_a = np.atleast_1d(as_float_array(hi, "Box hi")).copy()
         if lo_a.ndim != 1 or hi_a.ndim != 1:
             raise DimensionError(
                 f"Box bounds must be 1-D; got lo shape {lo_a.shape}, hi shape {hi_a.shape}")
@@ -57,8 +64,8 @@ class Box(SetBase):
 
     @classmethod
     def from_array(cls, arr: Any) -> Box:
-        """Build a box from a ``(d, 2)`` array of ``[lo, hi]`` rows."""
-        a = np.asarray(arr, dtype=float)
+        """Build a box from a ``(d, 2)`` array of ``[lo, hi]`` rows (as :meth:`as_array`)."""
+        a = as_float_array(arr, "Box.from_array arr")
         if a.ndim != 2 or a.shape[1] != 2:
             raise DimensionError(f"expected an array of shape (d, 2); got {a.shape}")
         return cls(a[:, 0], a[:, 1])
