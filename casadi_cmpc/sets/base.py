@@ -232,6 +232,12 @@ def load_set(path: str | Path) -> SetBase:
            + ("a JSON document with the keys 'type' and 'state'"
               if path.suffix.lower() == ".json" else
               "an .npz archive (numpy.savez) with a '__meta__' entry"))
+    if path.suffix.lower() == ".npz":
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+        if head[:2] != b"PK":  # every zip archive (numpy.savez) starts with 'PK'
+            what = "an empty file" if not head else f"a file starting with {head!r}"
+            raise ValueError(f"{bad}; found {what}, not a zip archive")
     try:
         if path.suffix.lower() == ".json":
             doc = json.loads(path.read_text())
@@ -247,7 +253,10 @@ def load_set(path: str | Path) -> SetBase:
                         state[key[2:]] = np.array(data[key])
     except (ValueError, KeyError, TypeError, AttributeError, OSError, EOFError,
             UnicodeDecodeError) as exc:
-        raise ValueError(f"{bad} ({type(exc).__name__}: {exc})") from exc
+        detail = str(exc)
+        if "pickle" in detail:  # numpy's hint to unpickle would mislead: never unpickle
+            detail = "the archive holds an entry that is not a plain numeric or text array"
+        raise ValueError(f"{bad} ({type(exc).__name__}: {detail})") from exc
     if not isinstance(doc, dict):
         raise ValueError(bad)
     cls = _TYPES.get(doc.get("type", ""))
