@@ -58,3 +58,33 @@ def test_as_boxes_normaliser():
         as_boxes(np.array([[np.nan, 0.0]]))
     with pytest.raises(cm.DimensionError, match="shape"):
         as_boxes(np.zeros(3))
+
+
+@pytest.mark.parametrize("lo, hi", [(["0", "a"], [1, 2]), (["0", "1"], ["1", "2"]),
+                                    ([0, 1], np.array(["1", "2"])), ("0", "1"),
+                                    ([0, np.str_("1")], [1, 2])])
+def test_box_refuses_strings_and_names_the_argument(lo, hi):
+    with pytest.raises(cm.InvalidBoundsError, match=r"Box (lo|hi) must be numbers"):
+        cm.Box(lo, hi)
+    with pytest.raises(ValueError):  # still a ValueError, as numpy's message was
+        cm.Box(lo, hi)
+
+
+def test_box_from_one_array_says_how_to_build_it():
+    arr = np.array([[0.0, 1.0], [2.0, 3.0]])
+    with pytest.raises(TypeError, match=r"Box\.from_array\(arr\).*Box\(\*arr\.T\)"):
+        cm.Box(arr)
+    B = cm.Box.from_array(arr)
+    assert B == cm.Box(*arr.T)
+    np.testing.assert_array_equal(B.as_array(), arr)
+    with pytest.raises(cm.InvalidBoundsError, match="must be numbers"):
+        cm.Box.from_array([["0", "1"]])
+
+
+@pytest.mark.parametrize("content", [b"hello", b"", b"\x93NUMPY\x01\x00"])
+def test_box_load_of_a_non_archive_names_file_and_format(tmp_path, content):
+    path = tmp_path / "junk.npz"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match="junk.npz.*expected an .npz archive") as exc:
+        cm.Box.load(path)
+    assert "allow_pickle" not in str(exc.value) and "pickled" not in str(exc.value)

@@ -312,3 +312,90 @@ def test_no_module_imports_cdd_at_import_time():
             "assert len(P.vertices()) == 4\n"
             "assert len(P.project([0], method='elimination').minimal().A) == 2\n")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+# ------------------------------------------------------ nearly flat point clouds
+def _check_flat_cloud(V):
+    """The protocol never raises on the hull of V and its certified answers hold."""
+    n = V.shape[1]
+    P = cm.Polytope.from_vertices(V)
+    for v in V:  # every input point is in the stored rows, exactly
+        assert exact_in(P.A, P.b, v)
+    for Q in (P, cm.Polytope(P.A, P.b)):
+        assert not Q.is_empty()
+        B = Q.bounding_box()
+        for v in V:  # the bounding box contains every input point, exactly
+            assert np.all(B.lo <= v) and np.all(v <= B.hi)
+        w = np.maximum(np.abs(V) * 1e-15, 1e-300)
+        tiny = np.stack([V - w, V + w], axis=-1)
+        assert Q.intersects_box(tiny).all()
+        inside = Q.contains_box(tiny)
+        for k in np.flatnonzero(inside):
+            for c in corners(tiny[k]):
+                assert exact_in(Q.A, Q.b, c)
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        far = np.stack([hi + (hi - lo) + 1.0, hi + 2 * (hi - lo) + 2.0], axis=-1)
+        Q.intersects_box(np.stack([np.stack([lo, hi], -1), far]))
+        Q.support(np.vstack([np.eye(n), -np.eye(n)]))
+    assert len(P.vertices()) >= 1
+
+
+def test_four_points_in_r4_near_a_point_are_flat():
+    V = np.array([[-37.49999994, -37.50000003, -37.49999995, -37.49999998],
+                  [-37.50000017, -37.49999991, -37.50000016, -37.50000004],
+                  [-37.49999979, -37.50000002, -37.49999987, -37.4999999],
+                  [-37.4999998, -37.4999998, -37.50000005, -37.4999998]])
+    P = cm.Polytope.from_vertices(V)
+    assert len(P.vertices()) == 4
+    assert any(np.array_equal(-a, c) for a in P.A for c in P.A)  # a slab pair
+    _check_flat_cloud(V)
+
+
+def test_affine_hull_rank_is_at_most_n_points_minus_one():
+    rng = np.random.default_rng(1)
+    for shift in (0.0, -37.5, 1e8, 1e12):
+        for N in range(1, 5):
+            V = shift + 1e-7 * max(1.0, abs(shift)) * rng.standard_normal((N, 4))
+            _, U, Nc = _hull.affine_hull(V)
+            assert U.shape[1] <= N - 1 or (N == 1 and U.shape[1] == 0)
+            assert U.shape[1] + Nc.shape[1] == 4
+
+
+def test_segment_far_from_origin_answers_without_error():
+    V = np.array([[1e12 + 1000 * a, 1e12 + 1000 * 0.3 * a] for a in (-1.3, 0.2, 0.9)])
+    P = cm.Polytope.from_vertices(V)
+    box = np.array([[[1e12, 1e12 + 1000.0]] * 2])
+    assert P.intersects_box(box)[0]  # the segment passes through the box
+    B = P.bounding_box()
+    slack = 64 * np.spacing(1e12)
+    assert B.hi[0] - B.lo[0] < 2200 + slack and B.hi[1] - B.lo[1] < 660 + slack
+    # a box beside the segment is separated (the LP stage gives a certificate)
+    assert not P.intersects_box(np.array([[[1e12 - 1300, 1e12 - 1200],
+                                           [1e12 + 100, 1e12 + 200]]]))[0]
+    _check_flat_cloud(V)
+
+
+def test_sliver_near_a_point_answers_without_error():
+    # six points on a segment of length 6e-3, flat up to the rounding of coordinates
+    rng = np.random.default_rng(14)
+    t = rng.uniform(-1, 1, 6)
+    V = np.c_[-38.6712 + 3e-3 * t, -50.2942 + 4.1e-4 * t]
+    _check_flat_cloud(V)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31),
+       shift=st.sampled_from([0.0, -37.5, 1e6, -1e8, 3.3e11, 1e12, -1e12]),
+       log_rel=st.floats(-9, 0), few=st.booleans())
+def test_flat_clouds_never_raise_and_contain_their_points(n, seed, shift, log_rel, few):
+    rng = np.random.default_rng(seed)
+    if few:  # N <= n points: at most N - 1 dimensions
+        N = int(rng.integers(1, n + 1))
+        r = max(N - 1, 1)
+    else:  # more points on an r-flat
+        r = int(rng.integers(1, n))
+        N = int(rng.integers(r + 1, 2 * n + 3))
+    spread = max(abs(shift), 1.0) * 10.0 ** log_rel
+    V = (rng.standard_normal((N, r)) @ rng.standard_normal((r, n))) * spread \
+        + shift * rng.uniform(0.5, 1.5, n)
+    _check_flat_cloud(V)
