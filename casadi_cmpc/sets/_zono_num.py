@@ -19,6 +19,7 @@ from math import comb
 import numpy as np
 
 from ..interval import arith as ia
+from ._exact import rat_nullspace
 
 __all__: list[str] = []
 
@@ -204,30 +205,10 @@ def _exact_null_vector(rows):
     """Exact normalised null vector of an (n-1) x n rational matrix of rank n-1, else None."""
     M = [[Fraction(float(v)) for v in row] for row in rows]
     n = len(M[0]) if M else 1
-    piv_cols = []
-    r = 0
-    for col in range(n):
-        piv = next((i for i in range(r, len(M)) if M[i][col] != 0), None)
-        if piv is None:
-            continue
-        M[r], M[piv] = M[piv], M[r]
-        pv = M[r][col]
-        M[r] = [v / pv for v in M[r]]
-        for i in range(len(M)):
-            if i != r and M[i][col] != 0:
-                f = M[i][col]
-                M[i] = [a - f * b for a, b in zip(M[i], M[r], strict=True)]
-        piv_cols.append(col)
-        r += 1
-        if r == len(M):
-            break
-    if r < n - 1:
+    basis = rat_nullspace(M, n)
+    if len(basis) != 1:
         return None
-    free = [c for c in range(n) if c not in piv_cols][0]
-    v = [Fraction(0)] * n
-    v[free] = Fraction(1)
-    for i, c in enumerate(piv_cols):
-        v[c] = -M[i][free]
+    v = basis[0]
     big = max(abs(x) for x in v)
     return [x / big for x in v]
 

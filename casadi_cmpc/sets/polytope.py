@@ -49,6 +49,7 @@ from ..exceptions import (
 )
 from . import _hull, _lp
 from ._boxkernel import BoxKernel, points_le
+from ._exact import rat_nullspace
 from .base import SetBase
 from .box import Box
 
@@ -1542,37 +1543,6 @@ def _frac_up(v: Fraction) -> float:
     return f
 
 
-def _rat_nullspace(M: list[list[Fraction]], k: int) -> list[list[Fraction]]:
-    """Basis of ``{v in Q^k : M v = 0}`` by exact Gauss–Jordan elimination."""
-    rows = [list(r) for r in M]
-    pivots: list[int] = []
-    r = 0
-    for col in range(k):
-        piv = next((i for i in range(r, len(rows)) if rows[i][col] != 0), None)
-        if piv is None:
-            continue
-        rows[r], rows[piv] = rows[piv], rows[r]
-        pv = rows[r][col]
-        rows[r] = [x / pv for x in rows[r]]
-        for i in range(len(rows)):
-            if i != r and rows[i][col] != 0:
-                f = rows[i][col]
-                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r], strict=True)]
-        pivots.append(col)
-        r += 1
-        if r == len(rows):
-            break
-    free = [c for c in range(k) if c not in pivots]
-    basis = []
-    for fc in free:
-        v = [Fraction(0)] * k
-        v[fc] = Fraction(1)
-        for i, pc in enumerate(pivots):
-            v[pc] = -rows[i][fc]
-        basis.append(v)
-    return basis
-
-
 def _farkas_empty(A: np.ndarray, b: np.ndarray, y: np.ndarray) -> bool:
     """Exact proof that ``{x : A x <= b}`` is empty, guided by approximate multipliers.
 
@@ -1589,7 +1559,7 @@ def _farkas_empty(A: np.ndarray, b: np.ndarray, y: np.ndarray) -> bool:
     while len(S) >= 1:
         k = len(S)
         M = [[Fraction(float(A[i, j])) for i in S] for j in range(n)]
-        basis = _rat_nullspace(M, k)
+        basis = rat_nullspace(M, k)
         if len(basis) == 1:
             v = basis[0]
             if sum(v) < 0:
