@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -132,21 +133,26 @@ def _merge_rows(A: np.ndarray, decimals: int = 9) -> np.ndarray:
     return A[np.sort(idx)]
 
 
-def _qhull(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Facet normals (unit, outward) and hull vertex indices of full-dimensional points Z."""
+def _convex_hull(Z: np.ndarray) -> Any:
+    """scipy's ConvexHull of Z, retried with joggled input ("QJ") for degenerate points."""
     from scipy.spatial import ConvexHull, QhullError
 
+    try:
+        return ConvexHull(Z)
+    except (QhullError, ValueError):
+        try:
+            return ConvexHull(Z, qhull_options="QJ")
+        except (QhullError, ValueError) as exc:
+            raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
+
+
+def _qhull(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Facet normals (unit, outward) and hull vertex indices of full-dimensional points Z."""
     Z = Z / max(float(np.abs(Z).max()), 1e-300)
     if Z.shape[0] <= Z.shape[1]:
         raise SolverError(f"Qhull needs at least {Z.shape[1] + 1} points in {Z.shape[1]}-D "
                           f"to build a simplex; got {Z.shape[0]}")
-    try:
-        h = ConvexHull(Z)
-    except (QhullError, ValueError):
-        try:
-            h = ConvexHull(Z, qhull_options="QJ")
-        except (QhullError, ValueError) as exc:
-            raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
+    h = _convex_hull(Z)
     normals = h.equations[:, :-1]
     if not np.isfinite(normals).all():
         raise SolverError("Qhull returned non-finite facet normals")
@@ -162,17 +168,9 @@ def _polygon_normals(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     subtraction and the norm are symmetric), so they tile the plane along the edge
     without a rounding-level gap.
     """
-    from scipy.spatial import ConvexHull, QhullError
-
     Z = P - P[0]  # the combinatorics only: translation and scale invariant
     Z = Z / max(float(np.abs(Z).max()), 1e-300)
-    try:
-        h = ConvexHull(Z)
-    except (QhullError, ValueError):
-        try:
-            h = ConvexHull(Z, qhull_options="QJ")
-        except (QhullError, ValueError) as exc:
-            raise SolverError(f"Qhull could not compute a convex hull: {exc}") from exc
+    h = _convex_hull(Z)
     Hv = P[h.vertices]
     rows = []
     for i, j in h.simplices:
