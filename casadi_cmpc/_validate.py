@@ -32,7 +32,13 @@ def _first_string(data: Any) -> Any:
 def as_float_array(data: Any, name: str) -> np.ndarray:
     """``np.asarray(data, dtype=float)`` that refuses strings (also numeric ones: a string
     is not a number) and names the argument when the conversion fails."""
-    s = _first_string(data)
+    try:
+        raw = np.asarray(data)
+    except (TypeError, ValueError) as exc:  # ragged nesting
+        raise InvalidBoundsError(f"{name} must be an array of numbers; {exc}") from exc
+    if raw.dtype.kind in "biuf":  # the common case: no element to inspect
+        return raw.astype(float, copy=False)
+    s = _first_string(data)  # the original elements (numpy turns 1 into "1" beside "a")
     if s is not None:
         raise InvalidBoundsError(
             f"{name} must be numbers; got the string {str(s)!r} (write numbers, e.g. 1.5, "

@@ -27,3 +27,16 @@ def test_minimize_on_a_partly_undefined_domain_prints_no_solver_warnings(capfd):
     out, err = capfd.readouterr()
     assert "NaN detected" not in out + err
     assert res.lower <= res.upper  # still a bracket (the minimum is -inf near x0 = 0)
+
+
+@pytest.mark.parametrize("A, b, bad", [
+    ([["1", "0"], ["0", "1"]], [1, 1], "Polytope A"),
+    ([[1, 0], [0, "a"]], [1, 1], "'a'"),
+    ([[1, 0], [0, 1]], [1, "2"], "Polytope b"),
+])
+def test_polytope_refuses_strings_naming_the_argument(A, b, bad):
+    from casadi_cmpc.exceptions import InvalidBoundsError
+
+    with pytest.raises(InvalidBoundsError, match=bad):
+        cm.Polytope(A, b)
+    assert cm.Polytope([[1, 0], [0, 1]], [1, 2]).contains([0.5, 1.5])  # numbers still work

@@ -39,7 +39,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._validate import as_boxes, as_points
+from .._validate import as_boxes, as_float_array, as_points
 from ..exceptions import (
     DimensionError,
     EmptySetError,
@@ -85,7 +85,7 @@ def _gamma(k: int) -> float:
 
 
 def _as_matrix(M: Any, n: int, name: str) -> np.ndarray:
-    arr = np.asarray(M, dtype=float)
+    arr = as_float_array(M, name)
     if arr.ndim == 0:
         arr = float(arr) * np.eye(n)
     if arr.ndim != 2:
@@ -98,7 +98,7 @@ def _as_matrix(M: Any, n: int, name: str) -> np.ndarray:
 def _as_vector(t: Any, p: int, name: str) -> np.ndarray:
     if t is None:
         return np.zeros(p)
-    arr = np.asarray(t, dtype=float).ravel()
+    arr = as_float_array(t, name).ravel()
     if arr.shape != (p,):
         raise DimensionError(f"{name} must have shape ({p},); got {np.shape(t)}")
     if not np.isfinite(arr).all():
@@ -153,8 +153,8 @@ class Polytope(SetBase):
     __array_ufunc__ = None  # numpy defers ``M @ P``, ``t + P`` to the Polytope
 
     def __init__(self, A: Any, b: Any) -> None:
-        A_a = np.array(A, dtype=float)
-        b_a = np.array(b, dtype=float)
+        A_a = np.array(as_float_array(A, "Polytope A"))
+        b_a = np.array(as_float_array(b, "Polytope b"))
         if A_a.ndim != 2:
             raise DimensionError(f"Polytope A must be a 2-D array (k, n); got shape {A_a.shape}")
         if b_a.ndim != 1:
