@@ -1,0 +1,1097 @@
+"""Nonlinear MPC with a compulsory contractive constraint (thesis §4.3, Alg 4.5).
+
+At each state ``x(k)`` the controller solves, for a horizon ``N`` (problem (4.22)-(4.23))::
+
+    min  sum_{i=1}^{N-1} e_i' Q e_i + e_N' P e_N + sum_{i=0}^{N-1} v_i' R v_i
+    s.t. x(i+1) = f(x(i), u(i), w_nom),  u(i) in U,  x(i) in X   (i = 1..N)
+         ||C e_N||_p <= alpha ||C e_0||_p                          (contraction)
+         g(x(i), u(i)) <= 0,  x(N) in S                            (optional)
+
+with ``e_i = x(i) - x_ref`` and ``v_i = u(i) - u_ref``. IPOPT (or CasADi ``sqpmethod`` with
+``qrqp``) finds a sequence; interval arithmetic then re-evaluates the whole prediction from
+the exact ``x(k)`` and only a sequence that passes is reported *verified*. When the local
+solver fails, a search over ``U^N`` (the library's SIVIA) finds a feasible sequence or proves
+that none exists (Alg 4.5: a horizon is left only when it is proven infeasible).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..exceptions import DimensionError, ModelError
+from ..interval.compiler import InclusionFunction, _op_name
+from ..model import Model
+from ..sets.box import Box
+from ..sets.polytope import Polytope
+from ..solvers.engine import Status
+from ..solvers.result import Result
+
+__all__ = ["Certificate", "ContractiveMPC", "MPCResult"]
+
+_SOLVERS = ("ipopt", "sqp", "lp")
+_MODES = ("receding", "sequence")
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass(frozen=True, eq=False)
+class Certificate:
+    """What was proven about one answer, in words and numbers.
+
+    Attributes
+    ----------
+    label : str
+        ``"verified"`` (the returned sequence satisfies every constraint, proven by interval
+        arithmetic), ``"unverified"`` (the check failed or was switched off: nothing is
+        claimed), ``"proved_infeasible"`` (no admissible sequence exists for any horizon
+        tried, proven by set inversion or an exact LP certificate), ``"undecided"`` (a search
+        budget ran out before a proof either way), ``"at_reference"`` (the state is the
+        reference: ``u_ref`` is applied), ``"local_law"`` (the state is in the set of the
+        local law, which is applied).
+    proved : bool or None
+        True when the claim is proven, False when its negation is proven, None otherwise.
+    claim : str
+        The statement the label refers to.
+    reason : str
+        How it was decided, or why it was not.
+    details : dict
+        Numbers: margins of the verified constraints, proofs per horizon (boxes, seconds),
+        the optimality bracket when requested.
+    """
+
+    label: str
+    proved: bool | None
+    claim: str
+    reason: str
+    details: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        return f"Certificate({self.label!r}, proved={self.proved}, reason={self.reason!r})"
+
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class MPCResult(Result):
+    """One solve of :class:`ContractiveMPC` from the state ``x``.
+
+    ``status``: ``PROVED`` the returned sequence is verified feasible; ``DISPROVED`` every
+    horizon tried is proven infeasible; ``BUDGET`` a search budget ran out; ``UNDECIDED``
+    the sequence could not be verified; ``NUMERICAL`` the local solver failed and no search
+    was made.
+
+    Attributes
+    ----------
+    x : ndarray (n,)
+        The state solved from.
+    u : ndarray (m,)
+        The first move (what ``ctrl(x)`` applies).
+    u_seq : ndarray (N, m)
+        The control sequence (the best available one; see ``certificate``).
+    x_pred : ndarray (N + 1, n)
+        Predicted states ``x(0) = x, ..., x(N)`` (float simulation with the nominal w).
+    cost : float
+        Value of (4.22) at ``u_seq`` (NaN when there is no sequence).
+    horizon : int or None
+        Horizon ``N`` used.
+    certificate : Certificate
+    stats : dict
+        ``solver`` (name), ``return_status``, ``iter_count``, ``solve_time`` (s, the local
+        solver), ``verify_time`` (s), ``search_time`` (s), ``horizons_tried``.
+    mode : str
+        ``"mpc"``, ``"at_reference"`` or ``"local_law"``.
+    """
+
+    x: np.ndarray
+    u: np.ndarray
+    u_seq: np.ndarray
+    x_pred: np.ndarray
+    cost: float
+    horizon: int | None
+    certificate: Certificate
+    stats: dict
+    mode: str = "mpc"
+
+    def _repr_parts(self) -> list[str]:
+        return [f"horizon={self.horizon}", f"certificate={self.certificate.label!r}",
+                f"cost={self.cost:.6g}"]
+
+
+# ------------------------------------------------------------------------ argument checks
+def _norm(norm: Any) -> float:
+    if isinstance(norm, str):
+        key = norm.strip().lower()
+        table = {"1": 1.0, "2": 2.0, "inf": math.inf, "infinity": math.inf}
+        if key not in table:
+            raise ValueError(f"norm must be 1, 2 or inf; got {norm!r}")
+        return table[key]
+    try:
+        p = float(norm)
+    except (TypeError, ValueError):
+        raise ValueError(f"norm must be 1, 2 or inf; got {norm!r}") from None
+    if p not in (1.0, 2.0, math.inf):
+        raise ValueError(f"norm must be 1, 2 or inf (np.inf); got {norm!r}")
+    return p
+
+
+def _alpha(alpha: Any) -> float:
+    try:
+        a = float(alpha)
+    except (TypeError, ValueError):
+        raise ValueError(f"alpha must be a number in (0, 1]; got {alpha!r}") from None
+    if isinstance(alpha, (bool, np.bool_)) or not (0.0 < a <= 1.0):
+        raise ValueError(f"the contraction parameter alpha must lie in (0, 1]; got {alpha!r}")
+    return a
+
+
+def _weight(M: Any, d: int, name: str, definite: bool, default: np.ndarray | None
+            ) -> np.ndarray:
+    if M is None:
+        return np.eye(d) if default is None else default
+    W = np.asarray(M, dtype=float)
+    if W.ndim == 0 or (W.ndim == 1 and W.size == 1 and d == 1):
+        W = W.reshape(1, 1) * np.eye(d) if W.size == 1 else W
+        W = np.atleast_2d(W)
+    if W.ndim == 1 and W.size == d:
+        W = np.diag(W)
+    if W.shape == (1, 1) and d > 1:
+        W = W[0, 0] * np.eye(d)
+    if W.shape != (d, d):
+        raise DimensionError(f"{name} must be a ({d}, {d}) matrix (or a scalar or a "
+                             f"length-{d} diagonal); got shape {np.shape(M)}")
+    if not np.isfinite(W).all():
+        raise ValueError(f"{name} must be finite; got {W.tolist()}")
+    if not np.allclose(W, W.T, rtol=1e-12, atol=1e-12 * (1 + np.abs(W).max())):
+        raise ValueError(f"{name} must be symmetric; got {W.tolist()}")
+    ev = np.linalg.eigvalsh(0.5 * (W + W.T))
+    tol = 1e-12 * max(1.0, float(np.abs(ev).max()))
+    if definite and ev.min() <= tol:
+        raise ValueError(f"{name} must be symmetric positive definite; its smallest "
+                         f"eigenvalue is {ev.min():.3g}")
+    if not definite and ev.min() < -tol:
+        raise ValueError(f"{name} must be symmetric positive semidefinite; its smallest "
+                         f"eigenvalue is {ev.min():.3g}")
+    return 0.5 * (W + W.T)
+
+
+def _vector(v: Any, d: int, name: str, default: np.ndarray) -> np.ndarray:
+    if v is None:
+        return default.copy()
+    a = np.asarray(v, dtype=float).reshape(-1)
+    if a.size != d:
+        raise DimensionError(f"{name} must have {d} elements; got shape {np.shape(v)}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite; got {a.tolist()}")
+    return a
+
+
+def _state(x: Any, n: int, name: str = "x") -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a numeric array of {n} elements; got {x!r}") from None
+    if a.size != n or a.ndim > 2 or (a.ndim == 2 and 1 not in a.shape):
+        raise DimensionError(f"{name} must have shape ({n},); got {a.shape}")
+    a = a.reshape(n)
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite; got {a.tolist()}")
+    return a
+
+
+def _find_undefined(expr: ca.SX, syms: list[ca.SX], vals: list[np.ndarray]) -> str:
+    """Name the innermost operation of ``expr`` that is not finite at the point ``vals``."""
+    def value(e: ca.SX) -> np.ndarray:
+        fn = ca.Function("v", syms, [e])
+        return np.asarray(fn(*vals), dtype=float).ravel()
+
+    out = value(expr)
+    k = int(np.flatnonzero(~np.isfinite(out))[0])
+    node = expr[k]
+    for _ in range(10000):
+        deps = [node.dep(i) for i in range(node.n_dep())]
+        bad = [d for d in deps if not np.isfinite(value(d)).all()]
+        if not bad:
+            args = ", ".join(f"{float(value(d)[0]):.6g}" for d in deps)
+            return (f"{_op_name(node.op())}({args}) = {float(value(node)[0])} in output "
+                    f"component {k}")
+        node = bad[0]
+    return f"output component {k}"  # pragma: no cover
+
+
+def check_defined(model: Model, w_nom: np.ndarray, samples: int = 512, seed: int = 0) -> None:
+    """Raise ModelError when f is undefined (NaN or infinite) at a sampled point of X x U.
+
+    Sampled: the centre, the vertices (up to 2^10 of them) and ``samples`` random points of
+    X x U with ``w = w_nom``. Sampling can miss a small undefined region; the interval
+    verification of every solve still reports undefined predictions.
+    """
+    rng = np.random.default_rng(seed)
+    lo = np.concatenate([model.X.lo, model.U.lo])
+    hi = np.concatenate([model.X.hi, model.U.hi])
+    d = lo.size
+    pts = [0.5 * (lo + hi)[None, :], lo + (hi - lo) * rng.random((samples, d))]
+    if d <= 10:
+        corners = (np.arange(2 ** d)[:, None] >> np.arange(d)) & 1
+        pts.append(np.where(corners == 1, hi, lo))
+    P = np.concatenate(pts)
+    n = model.n
+    with np.errstate(all="ignore"):
+        Y = model.step(P[:, :n], P[:, n:], np.broadcast_to(w_nom, (P.shape[0], model.l))
+                       if model.l else None)
+    bad = ~np.isfinite(Y).all(axis=1)
+    if bad.any():
+        p = P[int(np.flatnonzero(bad)[0])]
+        syms = [model.x, model.u] + ([model.w] if model.l else [])
+        vals = [p[:n], p[n:]] + ([w_nom] if model.l else [])
+        where = _find_undefined(model.f, syms, vals)
+        raise ModelError(
+            f"the model '{model.name}' is undefined at x = {p[:n].tolist()}, "
+            f"u = {p[n:].tolist()} inside X x U: {where}. Restrict X or U, or rewrite f so "
+            "that it is defined on the whole box")
+
+
+def _solver_options(solver: str, user: dict | None) -> tuple[str, dict]:
+    if solver == "ipopt":
+        opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+                "ipopt.max_iter": 300, "ipopt.warm_start_init_point": "yes",
+                "ipopt.mu_init": 1e-4}
+        plugin = "ipopt"
+    else:
+        opts = {"qpsol": "qrqp", "print_header": False, "print_iteration": False,
+                "print_status": False, "print_time": False, "error_on_fail": False,
+                "max_iter": 100,
+                "qpsol_options": {"print_iter": False, "print_header": False,
+                                  "error_on_fail": False}}
+        plugin = "sqpmethod"
+    if user:
+        opts.update(user)
+    return plugin, opts
+
+
+# ------------------------------------------------------------------------ one horizon
+class _Horizon:
+    """NLP, verification function and search function of one horizon N."""
+
+    def __init__(self, mpc: ContractiveMPC, N: int, nlp: bool = True) -> None:
+        self.N = N
+        model = mpc.model
+        n, m = model.n, model.m
+        self.n, self.m = n, m
+        us = ca.SX.sym("u", N * m)
+        x0 = ca.SX.sym("x0", n)
+        fun = model.function
+        w = ca.DM(mpc.w_nominal) if model.l else ca.DM.zeros(0, 1)
+        xs = [x0]
+        for i in range(N):
+            xs.append(fun(xs[-1], us[i * m:(i + 1) * m], w))
+        xr = ca.DM(mpc.x_ref)
+        ur = ca.DM(mpc.u_ref)
+        C = ca.DM(mpc.contract)
+        # cost (4.22)
+        cost = 0
+        for i in range(N):
+            v = us[i * m:(i + 1) * m] - ur
+            cost = cost + ca.mtimes([v.T, ca.DM(mpc.R), v])
+            e = xs[i + 1] - xr
+            W = mpc.P if i == N - 1 else mpc.Q
+            cost = cost + ca.mtimes([e.T, ca.DM(W), e])
+        eN = ca.mtimes(C, xs[N] - xr)
+        e0 = ca.mtimes(C, x0 - xr)
+        q = mpc.contract.shape[0]
+        p = mpc.norm
+        # -- the constraint vector shared by NLP, verification and search:
+        #    [x_1..x_N (in X); path constraints (<= 0); terminal rows (<= 0)]
+        parts, lo, hi = [], [], []
+        Xlo, Xhi = model.X.lo, model.X.hi
+        for i in range(1, N + 1):
+            parts.append(xs[i])
+            lo.append(Xlo)
+            hi.append(Xhi)
+        g_x, g_xu = mpc._path
+        for i in range(N):
+            if g_xu is not None:
+                parts.append(g_xu(xs[i], us[i * m:(i + 1) * m]))
+                k = g_xu.numel_out(0)
+                lo.append(np.full(k, -np.inf))
+                hi.append(np.zeros(k))
+            if g_x is not None:
+                parts.append(g_x(xs[i + 1]))
+                k = g_x.numel_out(0)
+                lo.append(np.full(k, -np.inf))
+                hi.append(np.zeros(k))
+        if mpc.terminal is not None:
+            H, h = mpc.terminal.A, mpc.terminal.b
+            parts.append(ca.mtimes(ca.DM(H), xs[N]) - ca.DM(h))
+            lo.append(np.full(H.shape[0], -np.inf))
+            hi.append(np.zeros(H.shape[0]))
+        common = ca.vertcat(*parts)
+        c_lo, c_hi = np.concatenate(lo), np.concatenate(hi)
+        # exact contraction value for the certificate: ||C e_N||_p - alpha ||C e_0||_p <= 0
+        if p == 2:
+            c_val = ca.sqrt(ca.sumsqr(eN)) - mpc.alpha * ca.sqrt(ca.sumsqr(e0))
+        elif p == 1:
+            c_val = ca.sum1(ca.fabs(eN)) - mpc.alpha * ca.sum1(ca.fabs(e0))
+        else:
+            c_val = ca.mmax(ca.fabs(eN)) - mpc.alpha * ca.mmax(ca.fabs(e0))
+        self.check_fun = ca.Function(f"check_{N}", [ca.vertcat(us, x0)],
+                                     [ca.vertcat(common, c_val)])
+        self.check_lo = np.concatenate([c_lo, [-np.inf]])
+        self.check_hi = np.concatenate([c_hi, [0.0]])
+        self.n_state_rows = n * N
+        self.cost_fun = ca.Function(f"cost_{N}", [ca.vertcat(us, x0)], [cost])
+        self.pred_fun = ca.Function(f"pred_{N}", [us, x0], [ca.horzcat(*xs)])
+        self.cost_pred = ca.Function(f"costpred_{N}", [us, x0], [cost, ca.horzcat(*xs)])
+        self._check_incl: InclusionFunction | None = None
+        self._batch: dict[int, ca.Function] = {}
+        # -- the NLP: contraction scaled by s = 1 / ||C e_0||_p, tightened by backoff
+        b = mpc.backoff
+        s = ca.SX.sym("s")
+        a_eff = mpc.alpha * (1.0 - b)
+        extra_x = ca.SX.sym("t", 0)
+        if p == 2:
+            c_nlp = s * s * ca.sumsqr(eN)
+            cl, ch = [-np.inf], [a_eff ** 2]
+        elif p == math.inf:
+            c_nlp = s * eN
+            cl, ch = [-a_eff] * q, [a_eff] * q
+        else:
+            extra_x = ca.SX.sym("t", q)
+            c_nlp = ca.vertcat(s * eN - extra_x, -s * eN - extra_x, ca.sum1(extra_x))
+            cl = [-np.inf] * (2 * q + 1)
+            ch = [0.0] * (2 * q) + [a_eff]
+        width = np.concatenate([np.tile(model.X.hi - model.X.lo, N),
+                                np.zeros(c_lo.size - n * N)])
+        tight = b * np.maximum(width, 1.0)
+        g_lo = np.where(np.isfinite(c_lo), c_lo + tight, c_lo)
+        g_hi = np.where(np.isfinite(c_hi), c_hi - tight, c_hi)
+        self.lbg = np.concatenate([g_lo, cl])
+        self.ubg = np.concatenate([g_hi, ch])
+        z = ca.vertcat(us, extra_x)
+        self.n_z = z.numel()
+        self.lbz = np.concatenate([np.tile(model.U.lo, N), np.zeros(extra_x.numel())])
+        self.ubz = np.concatenate([np.tile(model.U.hi, N), np.full(extra_x.numel(), np.inf)])
+        self.nlp = {"x": z, "p": ca.vertcat(x0, s), "f": cost,
+                    "g": ca.vertcat(common, c_nlp)}
+        self.solver = None
+        if nlp:
+            plugin, opts = _solver_options(mpc.solver, mpc.solver_options)
+            self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", plugin, self.nlp, opts)
+
+    @property
+    def check_inclusion(self) -> InclusionFunction:
+        if self._check_incl is None:
+            self._check_incl = InclusionFunction(self.check_fun, "natural")
+        return self._check_incl
+
+
+# ------------------------------------------------------------------------- controller
+class ContractiveMPC:
+    """Contractive MPC of thesis §4.3 (Alg 4.5), verified by interval arithmetic.
+
+    Parameters
+    ----------
+    model : Model
+        The discrete-time model; its boxes X and U are the state and input constraints.
+        A model with a disturbance ``w`` is predicted with ``w = w_nominal`` (default: the
+        centre of W) and the certificates hold for that nominal value.
+    horizon : int or None
+        The horizon ``N >= 1``, or None to search for the smallest feasible one in
+        ``[horizon_min, horizon_max]`` at every solve (Alg 4.5).
+    alpha : float in (0, 1]
+        Contraction parameter: ``||C (x(N) - x_ref)||_p <= alpha ||C (x(k) - x_ref)||_p``.
+    Q, R, P : array_like, optional
+        Weights of (4.22): ``Q`` (n, n) on ``x(1..N-1)``, ``P`` (n, n) on ``x(N)``
+        (default ``Q``), symmetric positive semidefinite; ``R`` (m, m) on the inputs,
+        symmetric positive definite. Defaults: identities. A scalar means that multiple of
+        the identity, a vector a diagonal.
+    norm : {1, 2, inf}
+        The p-norm of the contraction. IPOPT gets smooth forms: the squared 2-norm, bounds
+        for inf, and slack variables for 1.
+    x_ref, u_ref : array_like, optional
+        The reference equilibrium (default: the origin). ``f(x_ref, u_ref, w_nominal)`` must
+        equal ``x_ref`` (relative tolerance 1e-9), ``u_ref`` must lie in U and ``x_ref`` in X.
+    constraints : casadi.SX, optional
+        Extra path constraints ``g(x, u) <= 0`` (a vector expression of the model's ``x``
+        and ``u``, e.g. obstacle distances ``D^2 - |p - o|^2``). Components that depend on
+        ``x`` only are imposed on ``x(1), ..., x(N)``; the others on ``(x(i), u(i))``,
+        ``i = 0..N-1``.
+    terminal : Polytope, optional
+        Terminal constraint ``x(N) in terminal``.
+    contract : array_like (q, n), optional
+        The matrix ``C`` of the contraction (default: the identity); e.g. select the
+        position components whose distance to the target must contract.
+    local_law : array_like (m, n) or casadi.SX, optional
+        Dual mode: a gain ``K`` (``u = u_ref + K (x - x_ref)``) or an expression of the
+        model's ``x``, applied inside ``local_set``.
+    local_set : Polytope, PolytopeUnion or Box, optional
+        Where ``local_law`` is applied (default: ``terminal``).
+    solver : {"ipopt", "sqp", "lp"}
+        IPOPT (default), CasADi ``sqpmethod`` with ``qrqp``, or (linear models, ``norm`` 1
+        or inf, or a Polytope gauge given as ``norm``) the LP form (3.5)-(3.6) by HiGHS.
+    mode : {"receding", "sequence"}
+        ``"receding"``: solve at every call and apply the first move. ``"sequence"``:
+        apply the whole verified sequence before solving again (the thesis' scheme).
+    horizon_min, horizon_max : int
+        Range of the horizon search (``horizon=None``).
+    verify : bool
+        Re-evaluate every returned sequence in interval arithmetic (default True).
+    search : {"auto", "always", "never"}
+        Set inversion over ``U^N`` when the local solver gives no verified sequence
+        (``"auto"``), before trusting any failure (``"always"``: same as auto), or never.
+    search_eps : float, optional
+        Width under which SIVIA stops bisecting (default: 1/64 of the widest input range).
+    search_max_boxes, search_time_limit : int, float
+        Budget of one set inversion; when it runs out the answer is "undecided".
+    certify_optimal : bool
+        Bracket the global optimum of (4.22) with :func:`casadi_cmpc.minimize` over
+        ``U^N`` (small ``N m`` only); the bracket is in ``certificate.details``.
+    solver_options : dict, optional
+        Extra options of ``casadi.nlpsol``.
+    backoff : float
+        Relative tightening of the constraints given to the local solver (default 1e-6):
+        its solution then satisfies the exact constraints with a margin that survives the
+        interval re-check. Nothing is claimed from the tightening itself.
+
+    Examples
+    --------
+    >>> import casadi_cmpc as cm, numpy as np
+    >>> ex = cm.models.load("cannon")
+    >>> ctrl = cm.ContractiveMPC(ex.model, horizon=5, alpha=0.9)
+    >>> r = ctrl.solve([0.3, -0.2])
+    >>> r.certificate.label, r.u_seq.shape
+    ('verified', (5, 1))
+    """
+
+    def __init__(self, model: Model, horizon: int | None = None, alpha: float = 0.9,
+                 Q: Any = None, R: Any = None, P: Any = None, norm: Any = 2, *,
+                 x_ref: Any = None, u_ref: Any = None, w_nominal: Any = None,
+                 constraints: Any = None, terminal: Polytope | None = None,
+                 contract: Any = None, local_law: Any = None, local_set: Any = None,
+                 solver: str = "ipopt", mode: str = "receding", horizon_min: int = 1,
+                 horizon_max: int = 10, verify: bool = True, search: str = "auto",
+                 search_eps: float | None = None, search_max_boxes: int = 20000,
+                 search_time_limit: float = 5.0, certify_optimal: bool = False,
+                 optimal_eps: float | None = None, solver_options: dict | None = None,
+                 backoff: float = 1e-6) -> None:
+        if not isinstance(model, Model):
+            raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
+        if model.m == 0:
+            raise ModelError(f"model '{model.name}' has no input to control")
+        self.model = model
+        n, m = model.n, model.m
+        solver = str(solver).lower()
+        if solver not in _SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(_SOLVERS)}; got {solver!r}")
+        self.solver = solver
+        mode = str(mode).lower()
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {', '.join(_MODES)}; got {mode!r}")
+        self.mode = mode
+        self.alpha = _alpha(alpha)
+        self.gauge: Polytope | None = None
+        if isinstance(norm, Polytope):
+            if solver != "lp":
+                raise ValueError("a Polytope gauge as norm needs solver='lp'")
+            self.gauge = norm
+            self.norm = math.nan
+        else:
+            self.norm = _norm(norm)
+        self.Q = _weight(Q, n, "Q", definite=False, default=None)
+        self.R = _weight(R, m, "R", definite=True, default=None)
+        self.P = _weight(P, n, "P", definite=False, default=self.Q)
+        self.w_nominal = (_vector(w_nominal, model.l, "w_nominal", model.W.center)
+                          if model.l else np.zeros(0))
+        if model.l and not model.W.contains(self.w_nominal[None, :])[0]:
+            raise ValueError(f"w_nominal {self.w_nominal.tolist()} is outside W")
+        self.x_ref = _vector(x_ref, n, "x_ref", np.zeros(n))
+        self.u_ref = _vector(u_ref, m, "u_ref", np.zeros(m))
+        check_defined(model, self.w_nominal)
+        self._check_reference()
+        self.contract = (np.eye(n) if contract is None
+                         else np.atleast_2d(np.asarray(contract, dtype=float)))
+        if self.contract.ndim != 2 or self.contract.shape[1] != n:
+            raise DimensionError(f"contract must be a (q, {n}) matrix; got shape "
+                                 f"{np.shape(contract)}")
+        if not np.isfinite(self.contract).all() or not self.contract.any():
+            raise ValueError("contract must be finite and non-zero")
+        if terminal is not None:
+            if not isinstance(terminal, Polytope):
+                raise TypeError("terminal must be a Polytope (use its convex hull for a "
+                                f"union); got {type(terminal).__name__}")
+            if terminal.dim != n:
+                raise DimensionError(f"terminal has dimension {terminal.dim}, the model n = {n}")
+        self.terminal = terminal
+        self._path = self._path_functions(constraints)
+        self.constraints = constraints
+        self.local_law = local_law
+        self.local_set = local_set if local_set is not None else terminal
+        self._law = self._law_function(local_law) if local_law is not None else None
+        if self._law is not None and self.local_set is None:
+            raise ValueError("local_law needs local_set (or terminal) to say where it applies")
+        if horizon is not None:
+            horizon = self._int(horizon, "horizon")
+        self.horizon = horizon
+        self.horizon_min = self._int(horizon_min, "horizon_min")
+        self.horizon_max = self._int(horizon_max, "horizon_max")
+        if self.horizon_max < self.horizon_min:
+            raise ValueError(f"horizon_max ({horizon_max}) < horizon_min ({horizon_min})")
+        self.verify = bool(verify)
+        search = str(search).lower()
+        if search not in ("auto", "always", "never"):
+            raise ValueError(f"search must be 'auto', 'always' or 'never'; got {search!r}")
+        self.search = search
+        widest = float((model.U.hi - model.U.lo).max())
+        self.search_eps = float(search_eps) if search_eps is not None else widest / 64
+        if not self.search_eps > 0:
+            raise ValueError(f"search_eps must be positive; got {search_eps!r}")
+        self.search_max_boxes = int(search_max_boxes)
+        self.search_time_limit = float(search_time_limit)
+        self.certify_optimal = bool(certify_optimal)
+        self.optimal_eps = optimal_eps
+        self.solver_options = dict(solver_options or {})
+        self.backoff = float(backoff)
+        if not 0 <= self.backoff < 0.1:
+            raise ValueError(f"backoff must lie in [0, 0.1); got {backoff!r}")
+        self._horizons: dict[int, Any] = {}
+        self._warm: dict[int, np.ndarray] = {}
+        self._lam: dict[int, tuple[Any, Any]] = {}
+        self._queue: list[np.ndarray] = []
+        self.last_result: MPCResult | None = None
+        self.last_info: dict | None = None
+        if solver == "lp":
+            self._setup_lp()
+
+    # ------------------------------------------------------------------ set-up helpers
+    @staticmethod
+    def _int(v: Any, name: str) -> int:
+        if isinstance(v, (bool, np.bool_)) or not float(v).is_integer():
+            raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+        k = int(v)
+        if k < 1:
+            raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+        return k
+
+    def _check_reference(self) -> None:
+        model, xr, ur = self.model, self.x_ref, self.u_ref
+        if not model.X.contains(xr[None, :])[0]:
+            raise ValueError(f"x_ref {xr.tolist()} lies outside X = {model.X!r}")
+        if not model.U.contains(ur[None, :])[0]:
+            raise ValueError(f"u_ref {ur.tolist()} lies outside U = {model.U!r}")
+        nxt = model.step(xr, ur, self.w_nominal if model.l else None)
+        res = float(np.abs(nxt - xr).max())
+        if not res <= 1e-9 * (1.0 + float(np.abs(xr).max())):
+            raise ValueError(
+                f"(x_ref, u_ref) = ({xr.tolist()}, {ur.tolist()}) is not an equilibrium of "
+                f"'{model.name}': f(x_ref, u_ref) - x_ref = {(nxt - xr).tolist()} (largest "
+                f"residual {res:.3g}); pass an equilibrium, e.g. solve f(x, u) = x for u")
+
+    def _path_functions(self, g: Any) -> tuple[ca.Function | None, ca.Function | None]:
+        if g is None:
+            return None, None
+        model = self.model
+        if isinstance(g, (list, tuple)):
+            g = ca.vertcat(*g)
+        if not isinstance(g, ca.SX):
+            raise TypeError("constraints must be a casadi.SX expression of the model's x and "
+                            f"u; got {type(g).__name__}")
+        g = ca.reshape(ca.densify(g), g.numel(), 1)
+        allowed = {s.__hash__() for s in ca.symvar(ca.vertcat(model.x, model.u))}
+        free = [s for s in ca.symvar(g) if s.__hash__() not in allowed]
+        if free:
+            from ..exceptions import FreeSymbolError
+
+            raise FreeSymbolError("constraints may depend on the model's x and u only; they "
+                                  "depend on " + ", ".join(str(s) for s in free))
+        dep_u = [bool(ca.depends_on(g[i], model.u)) for i in range(g.numel())]
+        gx = [g[i] for i in range(g.numel()) if not dep_u[i]]
+        gxu = [g[i] for i in range(g.numel()) if dep_u[i]]
+        fx = ca.Function("g_x", [model.x], [ca.vertcat(*gx)]) if gx else None
+        fxu = ca.Function("g_xu", [model.x, model.u], [ca.vertcat(*gxu)]) if gxu else None
+        return fx, fxu
+
+    def _law_function(self, law: Any) -> ca.Function:
+        model = self.model
+        if isinstance(law, ca.SX):
+            if law.numel() != model.m:
+                raise DimensionError(f"local_law must have {model.m} elements")
+            return ca.Function("local_law", [model.x], [ca.reshape(law, model.m, 1)])
+        K = np.atleast_2d(np.asarray(law, dtype=float))
+        if K.shape != (model.m, model.n):
+            raise DimensionError(f"the local gain must have shape ({model.m}, {model.n}); "
+                                 f"got {K.shape}")
+        expr = ca.DM(self.u_ref) + ca.mtimes(ca.DM(K), model.x - ca.DM(self.x_ref))
+        return ca.Function("local_law", [model.x], [expr])
+
+    def _setup_lp(self) -> None:
+        if not self.model.is_linear:
+            raise ModelError("solver='lp' needs a linear model (x+ = A x + B u)")
+        if self.gauge is None and self.norm == 2:
+            raise ValueError("solver='lp' handles norm 1, inf or a Polytope gauge, not 2")
+        if self._path != (None, None):
+            raise ValueError("solver='lp' does not take nonlinear path constraints")
+        if self.model.l:
+            raise ModelError("solver='lp' is for models without disturbance")
+
+    def _get(self, N: int) -> _Horizon:
+        h = self._horizons.get(N)
+        if h is None:
+            h = self._horizons[N] = _Horizon(self, N)
+        return h
+
+    # ---------------------------------------------------------------------- solving
+    def __call__(self, x: Any) -> np.ndarray:
+        """The move to apply at state ``x``: shape (m,)."""
+        t0 = time.perf_counter()
+        if self.mode == "sequence" and self._queue:
+            u = self._queue.pop(0)
+            self.last_info = {"status": "ok", "certificate": "sequence", "horizon": None,
+                              "solve_time": time.perf_counter() - t0, "mode": "sequence"}
+            return u.copy()
+        r = self.solve(x)
+        if self.mode == "sequence" and r.mode == "mpc" and r.certificate.proved:
+            self._queue = [u.copy() for u in r.u_seq[1:]]
+        self.last_info = {"status": r.status.name, "certificate": r.certificate.label,
+                          "horizon": r.horizon, "solve_time": time.perf_counter() - t0,
+                          "mode": r.mode}
+        return r.u.copy()
+
+    def reset(self) -> None:
+        """Forget warm starts and the queued sequence."""
+        self._warm.clear()
+        self._lam.clear()
+        self._queue.clear()
+        self.last_result = None
+        self.last_info = None
+
+    def solve(self, x: Any) -> MPCResult:
+        """Solve at state ``x`` (shape (n,)) and return the :class:`MPCResult`."""
+        t0 = time.perf_counter()
+        xk = _state(x, self.model.n)
+        e0 = self.contract @ (xk - self.x_ref)
+        r0 = self._norm_value(e0)
+        if r0 == 0.0:
+            res = self._special(xk, self.u_ref.copy(), "at_reference",
+                                "the state is the reference: u_ref is applied", t0)
+        elif self._law is not None and self._in_local_set(xk):
+            u = np.asarray(self._law(xk), dtype=float).reshape(self.model.m)
+            res = self._special(xk, u, "local_law",
+                                "the state lies in local_set: the local law is applied", t0)
+        elif self.horizon is not None:
+            res = self._solve_fixed(xk, r0, self.horizon, t0)
+        else:
+            res = self._search_horizon(xk, r0, t0)
+        self.last_result = res
+        return res
+
+    def _norm_value(self, e: np.ndarray) -> float:
+        if self.gauge is not None:
+            P = self.gauge
+            return float(max(0.0, np.max(P.A @ e / P.b)))
+        return float(np.linalg.norm(e, ord=self.norm))
+
+    def _in_local_set(self, x: np.ndarray) -> bool:
+        S = self.local_set
+        return bool(np.asarray(S.contains(x[None, :])).reshape(-1)[0])
+
+    def _special(self, x: np.ndarray, u: np.ndarray, label: str, reason: str,
+                 t0: float) -> MPCResult:
+        cert = Certificate(label, None, "no optimisation at this state", reason)
+        xp = np.vstack([x, self.model.step(x, u, self.w_nominal if self.model.l else None)])
+        return MPCResult(status=Status.UNDECIDED, message=reason, method="contractive_mpc",
+                         nit=0, n_boxes=0, elapsed=time.perf_counter() - t0, x=x, u=u,
+                         u_seq=u[None, :], x_pred=xp, cost=math.nan, horizon=None,
+                         certificate=cert, stats={}, mode=label)
+
+    # one horizon ------------------------------------------------------------------
+    def _local(self, x: np.ndarray, r0: float, N: int, start: np.ndarray | None
+               ) -> tuple[np.ndarray | None, dict]:
+        """Local solve at horizon N: (clipped sequence or None, stats)."""
+        if self.solver == "lp":
+            return self._local_lp(x, N)
+        h = self._get(N)
+        m = self.model.m
+        z0 = np.zeros(h.n_z)
+        if start is not None:
+            z0[:N * m] = start.ravel()
+        else:
+            warm = self._warm.get(N)
+            if warm is not None:
+                z0[:N * m] = np.concatenate([warm[1:], warm[-1:]]).ravel()
+            else:
+                z0[:N * m] = np.tile(np.clip(self.u_ref, self.model.U.lo, self.model.U.hi), N)
+        if h.n_z > N * m:  # 1-norm slacks
+            eN = self.contract @ (h.pred_fun(z0[:N * m], x).full()[:, -1] - self.x_ref)
+            z0[N * m:] = np.abs(eN) / r0 + 1e-3
+        s = 1.0 / r0
+        lam = self._lam.get(N) if start is None else None
+        t = time.perf_counter()
+        if lam is not None:
+            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lbx=h.lbz, ubx=h.ubz,
+                           lbg=h.lbg, ubg=h.ubg, lam_x0=lam[0], lam_g0=lam[1])
+        else:
+            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lbx=h.lbz, ubx=h.ubz,
+                           lbg=h.lbg, ubg=h.ubg)
+        dt = time.perf_counter() - t
+        st = h.solver.stats()
+        stats = {"solver": self.solver, "return_status": st.get("return_status", ""),
+                 "success": bool(st.get("success", False)),
+                 "iter_count": int(st.get("iter_count", 0)), "solve_time": dt}
+        z = np.asarray(sol["x"], dtype=float).ravel()
+        if not np.isfinite(z).all():
+            self._lam.pop(N, None)
+            return None, stats
+        if stats["success"]:
+            self._lam[N] = (sol["lam_x"], sol["lam_g"])
+        u = np.clip(z[:N * m].reshape(N, m), self.model.U.lo, self.model.U.hi)
+        return u, stats
+
+    def _local_lp(self, x: np.ndarray, N: int) -> tuple[np.ndarray | None, dict]:
+        from .linear import ContractiveLP
+
+        key = ("lp", N)
+        lp = self._horizons.get(key)
+        if lp is None:
+            A, B = self.model.linear_matrices()[:2]
+            gauge = self.gauge if self.gauge is not None else self.norm
+            lp = self._horizons[key] = ContractiveLP(
+                A, B, self.model.X, self.model.U, N, self.alpha, gauge, x_ref=self.x_ref,
+                u_ref=self.u_ref, terminal=self.terminal, backoff=self.backoff)
+        t = time.perf_counter()
+        step = lp.solve(x)
+        stats = {"solver": "lp", "return_status": step.status, "success":
+                 step.status == "optimal", "iter_count": 0,
+                 "solve_time": time.perf_counter() - t, "lp_proof": step.proof}
+        if step.status != "optimal":
+            return None, stats
+        return np.asarray(step.u_seq, dtype=float), stats
+
+    def _check(self, x: np.ndarray, N: int, useq: np.ndarray) -> tuple[bool, dict]:
+        """Interval re-evaluation of ``useq`` from the exact ``x``: (verified, details)."""
+        h = self._get_check(N)
+        z = np.concatenate([useq.ravel(), x])
+        box = np.stack([z, z], axis=-1)[None]
+        Y = h.check_inclusion.evaluate_unchecked([box], 1)[0][0]
+        ok_lo = Y[:, 0] >= h.check_lo
+        ok_hi = Y[:, 1] <= h.check_hi
+        ok = ok_lo & ok_hi
+        slack = np.minimum(Y[:, 0] - h.check_lo, h.check_hi - Y[:, 1])
+        details = {"min_margin": float(np.min(slack)),
+                   "contraction_upper": float(Y[-1, 1])}
+        if ok.all():
+            return True, details
+        bad = int(np.flatnonzero(~ok)[0])
+        details["failed"] = self._describe_row(h, bad, Y[bad])
+        return False, details
+
+    def _get_check(self, N: int) -> _Horizon:
+        if self.solver == "lp":
+            key = ("lpcheck", N)
+            h = self._horizons.get(key)
+            if h is None:
+                h = self._horizons[key] = _CheckOnly(self, N)
+            return h
+        return self._get(N)
+
+    def _describe_row(self, h: Any, row: int, y: np.ndarray) -> str:
+        n = self.model.n
+        if row == h.check_lo.size - 1:
+            return (f"contraction: ||C (x(N) - x_ref)|| - alpha ||C (x(k) - x_ref)|| in "
+                    f"[{y[0]:.6g}, {y[1]:.6g}], not <= 0")
+        if row < h.n_state_rows:
+            i, j = divmod(row, n)
+            return (f"state x{j + 1}({i + 1}) in [{y[0]:.6g}, {y[1]:.6g}] not inside "
+                    f"[{h.check_lo[row]:.6g}, {h.check_hi[row]:.6g}]")
+        return f"constraint row {row} in [{y[0]:.6g}, {y[1]:.6g}], not <= 0"
+
+    def _attempt(self, x: np.ndarray, r0: float, N: int, start: np.ndarray | None = None
+                 ) -> tuple[np.ndarray | None, bool, dict, dict]:
+        """Local solve + verification at horizon N."""
+        u, stats = self._local(x, r0, N, start)
+        if u is None:
+            return None, False, stats, {"failed": "the local solver returned no sequence"}
+        if not self.verify:
+            return u, False, stats, {"failed": "verification switched off"}
+        t = time.perf_counter()
+        ok, details = self._check(x, N, u)
+        stats["verify_time"] = time.perf_counter() - t
+        return u, ok, stats, details
+
+    def _solve_fixed(self, x: np.ndarray, r0: float, N: int, t0: float) -> MPCResult:
+        u, ok, stats, details = self._attempt(x, r0, N)
+        stats["horizons_tried"] = [N]
+        if ok:
+            return self._verified(x, N, u, stats, details, t0, [])
+        proofs: list[dict] = []
+        if self.search != "never":
+            found, proof = self._set_inversion(x, r0, N)
+            proofs.append(proof)
+            stats["search_time"] = proof["elapsed"]
+            if found is not None:
+                return self._verified(x, N, found, stats, proof.get("details", {}), t0,
+                                      proofs)
+            if proof["result"] == "infeasible":
+                return self._infeasible(x, [N], u, stats, proofs, t0)
+        return self._unverified(x, N, u, stats, details, proofs, t0)
+
+    def _search_horizon(self, x: np.ndarray, r0: float, t0: float) -> MPCResult:
+        proofs: list[dict] = []
+        tried: list[int] = []
+        last_u, last_stats, last_details = None, {}, {}
+        for N in range(self.horizon_min, self.horizon_max + 1):
+            tried.append(N)
+            u, ok, stats, details = self._attempt(x, r0, N)
+            stats["horizons_tried"] = list(tried)
+            if ok:
+                return self._verified(x, N, u, stats, details, t0, proofs)
+            if u is not None:
+                last_u, last_stats, last_details = u, stats, details
+            if self.search == "never":
+                continue
+            found, proof = self._set_inversion(x, r0, N)
+            proofs.append(proof)
+            if found is not None:
+                return self._verified(x, N, found, stats, proof.get("details", {}), t0,
+                                      proofs)
+            if proof["result"] != "infeasible":
+                stats["horizons_tried"] = list(tried)
+                return self._unverified(x, N, u if u is not None else last_u, stats,
+                                        details, proofs, t0)
+        if self.search == "never":
+            return self._unverified(x, tried[-1], last_u, last_stats, last_details, proofs, t0)
+        return self._infeasible(x, tried, last_u, last_stats, proofs, t0)
+
+    # set inversion over U^N -------------------------------------------------------
+    def _set_inversion(self, x: np.ndarray, r0: float, N: int
+                       ) -> tuple[np.ndarray | None, dict]:
+        """Find a verified sequence or prove that none exists at horizon N."""
+        from ..solvers.sivia import sivia
+
+        t = time.perf_counter()
+        h = self._get_check(N)
+        m = self.model.m
+        F = h.check_inclusion
+        Ulo, Uhi = np.tile(self.model.U.lo, N), np.tile(self.model.U.hi, N)
+        # 1. cheap candidates: random sequences, checked in one batch
+        rng = np.random.default_rng(0)
+        K = 256
+        cand = Ulo + (Uhi - Ulo) * rng.random((K, N * m))
+        cand[0] = 0.5 * (Ulo + Uhi)
+        found = self._best_verified(h, F, x, cand, N)
+        if found is not None:
+            return found, {"horizon": N, "result": "feasible", "boxes": 0,
+                           "elapsed": time.perf_counter() - t,
+                           "how": "a sampled sequence passed the interval check"}
+        # 2. SIVIA over U^N x {x}
+        Z = Box(np.concatenate([Ulo, x]), np.concatenate([Uhi, x]))
+        Y = Box(h.check_lo, h.check_hi)
+        pav = sivia(F, Z, Y, self.search_eps, max_boxes=self.search_max_boxes,
+                    time_limit=self.search_time_limit, keep_outer=False, progress=False)
+        n_boxes = int(getattr(pav, "n_classified", pav.n_boxes))
+        proof = {"horizon": N, "boxes": n_boxes, "discarded": int(pav.n_discarded),
+                 "elapsed": 0.0, "eps": self.search_eps}
+        if pav.inner.shape[0]:
+            mid = 0.5 * (pav.inner[:, :N * m, 0] + pav.inner[:, :N * m, 1])
+            found = self._best_verified(h, F, x, mid, N)
+            if found is not None:
+                proof.update(result="feasible", how="an inner box of SIVIA over U^N")
+                proof["elapsed"] = time.perf_counter() - t
+                return found, proof
+        if pav.inner.shape[0] == 0 and pav.boundary.shape[0] == 0:
+            proof.update(result="infeasible",
+                         how=f"SIVIA over U^{N} discarded every box: no sequence in U^{N} "
+                             "satisfies the constraints")
+            proof["elapsed"] = time.perf_counter() - t
+            return None, proof
+        # 3. undecided boxes: their midpoints, then local solves started from them
+        if pav.boundary.shape[0]:
+            mids = 0.5 * (pav.boundary[:, :N * m, 0] + pav.boundary[:, :N * m, 1])
+            found = self._best_verified(h, F, x, mids, N)
+            if found is None and self.solver != "lp":
+                order = np.argsort(np.max(pav.boundary[:, :N * m, 1]
+                                          - pav.boundary[:, :N * m, 0], axis=1))[::-1]
+                for k in order[:3]:
+                    u, ok, _, _ = self._attempt(x, r0, N, start=mids[k])
+                    if ok:
+                        found = u
+                        break
+            if found is not None:
+                proof.update(result="feasible",
+                             how="a sequence from an undecided box of SIVIA passed the check")
+                proof["elapsed"] = time.perf_counter() - t
+                return found, proof
+        budget = pav.status == Status.BUDGET
+        proof.update(result="undecided",
+                     how=("the search budget ran out" if budget else
+                          f"{pav.boundary.shape[0]} boxes narrower than eps stayed undecided"),
+                     budget=bool(budget))
+        proof["elapsed"] = time.perf_counter() - t
+        return None, proof
+
+    def _best_verified(self, h: Any, F: InclusionFunction, x: np.ndarray, cand: np.ndarray,
+                       N: int) -> np.ndarray | None:
+        if cand.shape[0] == 0:
+            return None
+        z = np.concatenate([cand, np.broadcast_to(x, (cand.shape[0], x.size))], axis=1)
+        Y = F.evaluate_unchecked([np.stack([z, z], axis=-1)], z.shape[0])[0]
+        ok = ((Y[:, :, 0] >= h.check_lo) & (Y[:, :, 1] <= h.check_hi)).all(axis=1)
+        if not ok.any():
+            return None
+        good = cand[ok]
+        costs = self._costs(N, good, x)
+        return good[int(np.argmin(costs))].reshape(N, self.model.m)
+
+    def _costs(self, N: int, useqs: np.ndarray, x: np.ndarray) -> np.ndarray:
+        h = self._get_check(N)
+        fm = h._batch.get(useqs.shape[0])
+        if fm is None:
+            fm = h._batch[useqs.shape[0]] = h.cost_fun.map(useqs.shape[0])
+        z = np.concatenate([useqs, np.broadcast_to(x, (useqs.shape[0], x.size))], axis=1)
+        return np.asarray(fm(z.T), dtype=float).ravel()
+
+    # results ------------------------------------------------------------------------
+    def _predict(self, N: int, u: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
+        h = self._get_check(N)
+        c, xs = h.cost_pred(u.ravel(), x)
+        return float(c), np.asarray(xs, dtype=float).T
+
+    def _optimality(self, x: np.ndarray, N: int) -> dict:
+        from ..solvers.minimize import minimize
+
+        h = self._get_check(N)
+        m = self.model.m
+        Z = Box(np.concatenate([np.tile(self.model.U.lo, N), x]),
+                np.concatenate([np.tile(self.model.U.hi, N), x]))
+        zs = ca.SX.sym("z", N * m + self.model.n)
+        gv = h.check_fun(zs)
+        rows = []
+        for i in range(h.check_lo.size):
+            if np.isfinite(h.check_hi[i]):
+                rows.append(gv[i] - h.check_hi[i])
+            if np.isfinite(h.check_lo[i]):
+                rows.append(h.check_lo[i] - gv[i])
+        g = ca.Function("g", [zs], [ca.vertcat(*rows)])
+        eps = self.optimal_eps or self.search_eps
+        r = minimize(h.cost_fun, Z, eps, constraints=g, max_boxes=self.search_max_boxes,
+                     time_limit=self.search_time_limit, progress=False)
+        return {"lower": float(r.lower), "upper": float(r.upper),
+                "width": float(r.upper - r.lower), "status": r.status.name,
+                "boxes": int(r.n_boxes)}
+
+    def _verified(self, x: np.ndarray, N: int, u: np.ndarray, stats: dict, details: dict,
+                  t0: float, proofs: list[dict]) -> MPCResult:
+        self._warm[N] = u.copy()
+        cost, xp = self._predict(N, u, x)
+        details = dict(details)
+        if proofs:
+            details["proofs"] = proofs
+        w = (f" with the nominal disturbance w = {self.w_nominal.tolist()}"
+             if self.model.l else "")
+        claim = (f"the sequence keeps x(1..{N}) in X, satisfies every extra constraint and "
+                 f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}")
+        if self.certify_optimal:
+            details["optimal_bracket"] = self._optimality(x, N)
+        cert = Certificate("verified", True, claim,
+                           "interval re-evaluation from the exact state, outward rounding",
+                           details)
+        n_boxes = sum(int(p.get("boxes", 0)) for p in proofs)
+        return MPCResult(status=Status.PROVED, message=f"verified at horizon {N}",
+                         method=f"contractive_mpc/{self.solver}",
+                         nit=int(stats.get("iter_count", 0)), n_boxes=n_boxes,
+                         elapsed=time.perf_counter() - t0, x=x, u=u[0].copy(), u_seq=u,
+                         x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
+
+    def _norm_name(self) -> str:
+        if self.gauge is not None:
+            return "gauge of the given polytope around x_ref"
+        p = {1.0: "1", 2.0: "2", math.inf: "inf"}[self.norm]
+        return f"{p}-norm of C (x - x_ref)"
+
+    def _fallback(self, x: np.ndarray, N: int, u: np.ndarray | None) -> np.ndarray:
+        """The sequence applied when nothing is verified: the local solution, or the tail
+        of the last verified sequence, or u_ref (all clipped into U)."""
+        if u is not None:
+            return u
+        warm = self._warm.get(N)
+        if warm is not None:
+            return np.concatenate([warm[1:], warm[-1:]])
+        return np.tile(np.clip(self.u_ref, self.model.U.lo, self.model.U.hi), (N, 1))
+
+    def _unverified(self, x: np.ndarray, N: int, u: np.ndarray | None, stats: dict,
+                    details: dict, proofs: list[dict], t0: float) -> MPCResult:
+        seq = self._fallback(x, N, u)
+        cost, xp = self._predict(N, seq, x)
+        budget = any(p.get("budget") for p in proofs)
+        undecided = bool(proofs) and proofs[-1].get("result") == "undecided"
+        label = "undecided" if undecided else "unverified"
+        reason = details.get("failed", "")
+        if undecided:
+            reason = (f"horizon {N}: the local solver gave no verified sequence and the "
+                      f"search over U^{N} did not decide ({proofs[-1]['how']})")
+        details = dict(details)
+        if proofs:
+            details["proofs"] = proofs
+        cert = Certificate(label, None, f"a feasible sequence exists at horizon {N}",
+                           reason, details)
+        status = Status.BUDGET if budget else (Status.UNDECIDED if u is not None
+                                               else Status.NUMERICAL)
+        return MPCResult(status=status, message=reason or label,
+                         method=f"contractive_mpc/{self.solver}",
+                         nit=int(stats.get("iter_count", 0)),
+                         n_boxes=sum(int(p.get("boxes", 0)) for p in proofs),
+                         elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
+                         x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
+
+    def _infeasible(self, x: np.ndarray, tried: list[int], u: np.ndarray | None,
+                    stats: dict, proofs: list[dict], t0: float) -> MPCResult:
+        N = tried[-1]
+        seq = self._fallback(x, N, u)
+        cost, xp = self._predict(N, seq, x)
+        hs = ", ".join(str(k) for k in tried)
+        reason = (f"proved: no admissible sequence satisfies the constraints at horizon(s) "
+                  f"{hs} (set inversion over U^N discarded every box)")
+        cert = Certificate("proved_infeasible", False,
+                           f"a feasible sequence exists at some horizon in {hs}", reason,
+                           {"proofs": proofs})
+        return MPCResult(status=Status.DISPROVED, message=reason,
+                         method=f"contractive_mpc/{self.solver}",
+                         nit=int(stats.get("iter_count", 0)),
+                         n_boxes=sum(int(p.get("boxes", 0)) for p in proofs),
+                         elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
+                         x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
+
+    def __repr__(self) -> str:
+        hz = self.horizon if self.horizon is not None else \
+            f"search {self.horizon_min}..{self.horizon_max}"
+        return (f"ContractiveMPC('{self.model.name}', horizon={hz}, alpha={self.alpha}, "
+                f"norm={self._norm_name()}, solver='{self.solver}', mode='{self.mode}')")
+
+
+class _CheckOnly:
+    """Verification and search functions of horizon N without an NLP (LP controllers)."""
+
+    def __init__(self, mpc: ContractiveMPC, N: int) -> None:
+        h = _Horizon(mpc, N, nlp=False)
+        self.__dict__.update(h.__dict__)
+        if mpc.gauge is not None:
+            # the LP contracts the gauge of a polytope: replace the contraction row
+            model = mpc.model
+            z = ca.SX.sym("z", N * model.m + model.n)
+            us, x0 = z[:N * model.m], z[N * model.m:]
+            xs = h.pred_fun(us, x0)
+            P = mpc.gauge
+            xr = ca.DM(mpc.x_ref)
+            gN = ca.mmax(ca.mtimes(ca.DM(P.A), xs[:, N] - xr) / ca.DM(P.b))
+            g0 = ca.fmax(0, ca.mmax(ca.mtimes(ca.DM(P.A), x0 - xr) / ca.DM(P.b)))
+            rows = h.check_fun(z)
+            self.check_fun = ca.Function(f"check_{N}", [z],
+                                         [ca.vertcat(rows[:-1], gN - mpc.alpha * g0)])
+
+    @property
+    def check_inclusion(self) -> InclusionFunction:
+        if self._check_incl is None:
+            self._check_incl = InclusionFunction(self.check_fun, "natural")
+        return self._check_incl
+

@@ -1,0 +1,308 @@
+"""Contractive MPC (thesis §4.3, Alg 4.5): verified sequences, horizon search, proofs."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import casadi_cmpc as cm
+from casadi_cmpc.exceptions import DimensionError, ModelError
+from casadi_cmpc.mpc.contractive import ContractiveMPC
+
+
+def _norm(e: np.ndarray, p: float) -> float:
+    return float(np.linalg.norm(e, ord=p))
+
+
+def _check_sequence(model, x0, useq, alpha, p, x_ref=None, C=None):
+    """Float re-simulation of a verified sequence: X, U and the contraction hold."""
+    x_ref = np.zeros(model.n) if x_ref is None else np.asarray(x_ref)
+    C = np.eye(model.n) if C is None else C
+    assert ((useq >= model.U.lo) & (useq <= model.U.hi)).all()
+    x = np.asarray(x0, float)
+    for u in useq:
+        x = model.step(x, u)
+        assert ((x >= model.X.lo) & (x <= model.X.hi)).all()
+    assert _norm(C @ (x - x_ref), p) <= alpha * _norm(C @ (np.asarray(x0) - x_ref), p) + 1e-12
+
+
+@pytest.fixture(scope="module")
+def cannon():
+    return cm.models.load("cannon").model
+
+
+@pytest.mark.parametrize("solver", ["ipopt", "sqp"])
+@pytest.mark.parametrize("p", [1, 2, np.inf])
+def test_verified_sequence_satisfies_constraints(cannon, solver, p):
+    ctrl = ContractiveMPC(cannon, horizon=6, alpha=0.8, norm=p, solver=solver)
+    for x0 in ([0.3, -0.2], [1.9, -1.5], [-1.0, 1.2]):
+        r = ctrl.solve(x0)
+        assert r.certificate.label == "verified" and r.certificate.proved is True
+        assert r.success and r.status == cm.Status.PROVED
+        assert r.u_seq.shape == (6, 1) and r.x_pred.shape == (7, 2)
+        _check_sequence(cannon, x0, r.u_seq, 0.8, p)
+        # the prediction is the float simulation of the sequence
+        x = np.asarray(x0, float)
+        for i, u in enumerate(r.u_seq):
+            x = cannon.step(x, u)
+            np.testing.assert_allclose(r.x_pred[i + 1], x, rtol=1e-12, atol=1e-14)
+        assert r.certificate.details["contraction_upper"] <= 0
+
+
+def test_cost_matches_formula(cannon):
+    Q, R, P = np.diag([1.0, 2.0]), np.array([[0.5]]), np.diag([3.0, 1.0])
+    ctrl = ContractiveMPC(cannon, horizon=4, alpha=0.9, Q=Q, R=R, P=P)
+    x0 = np.array([0.8, -0.4])
+    r = ctrl.solve(x0)
+    xs = r.x_pred
+    want = sum(float(u @ R @ u) for u in r.u_seq)
+    want += sum(float(x @ Q @ x) for x in xs[1:-1]) + float(xs[-1] @ P @ xs[-1])
+    assert r.cost == pytest.approx(want, rel=1e-9)
+
+
+def test_first_move_and_warm_start(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=5, alpha=0.9, solver="sqp")
+    x = np.array([1.5, -1.0])
+    us = []
+    for _ in range(40):
+        u = ctrl(x)
+        assert u.shape == (1,)
+        assert ctrl.last_info["certificate"] == "verified"
+        assert ctrl.last_info["horizon"] == 5
+        us.append(u)
+        x = cannon.step(x, u)
+    assert np.abs(x).max() < 0.15
+
+
+def test_sequence_mode_applies_whole_sequence(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=4, alpha=0.9, mode="sequence")
+    x = np.array([1.0, -0.5])
+    r = None
+    modes = []
+    for _ in range(8):
+        u = ctrl(x)
+        if ctrl.last_info["mode"] == "mpc":
+            r = ctrl.last_result
+            assert np.array_equal(u, r.u_seq[0])
+            k = 0
+        else:
+            k += 1
+            assert np.array_equal(u, r.u_seq[k])
+        modes.append(ctrl.last_info["mode"])
+        x = cannon.step(x, u)
+    assert modes == ["mpc", "sequence", "sequence", "sequence"] * 2
+
+
+def test_terminal_polytope_constraint(cannon):
+    T = cm.models.load("cannon").terminal
+    ctrl = ContractiveMPC(cannon, horizon=8, alpha=0.9, terminal=T)
+    r = ctrl.solve([1.2, -0.6])
+    assert r.certificate.label == "verified"
+    assert T.contains(r.x_pred[-1][None, :])[0]
+    # exact check of the terminal rows in rationals
+    xN = [Fraction(v) for v in r.x_pred[-1]]
+    for a, b in zip(T.A, T.b, strict=True):
+        assert sum(Fraction(ai) * xi for ai, xi in zip(a, xN, strict=True)) <= Fraction(b)
+
+
+def test_path_constraints_hold():
+    # a 3-state model, obstacle-like constraint on (x1, x2)
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u", 2)
+    f = ca.vertcat(x[0] + 0.1 * u[0], x[1] + 0.1 * u[1], 0.9 * x[2] + 0.05 * x[0])
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-3] * 3, [3] * 3), U=cm.Box([-1, -1], [1, 1]))
+    g = 0.3 ** 2 - ((x[0] - 1.0) ** 2 + (x[1] - 0.9) ** 2)  # keep out of a disc
+    ctrl = ContractiveMPC(model, horizon=6, alpha=0.95, constraints=g)
+    xk = np.array([2.0, 1.8, 0.0])
+    for _ in range(60):
+        r = ctrl.solve(xk)
+        assert r.certificate.label == "verified"
+        for xp in r.x_pred[1:]:
+            assert (xp[0] - 1.0) ** 2 + (xp[1] - 0.9) ** 2 >= 0.3 ** 2
+        xk = model.step(xk, r.u)
+    assert np.abs(xk).max() < 0.2
+
+
+def test_grimm_horizon_search_proves_short_horizons_infeasible():
+    ex = cm.models.load("grimm")
+    ctrl = ContractiveMPC(ex.model, horizon=None, alpha=0.5, horizon_max=4)
+    r = ctrl.solve([2.0, 2.0])
+    assert r.certificate.label == "verified" and r.horizon == 2
+    proofs = r.certificate.details["proofs"]
+    assert proofs[0]["horizon"] == 1 and proofs[0]["result"] == "infeasible"
+    assert proofs[0]["boxes"] >= 1 and proofs[0]["elapsed"] >= 0
+    # horizon 1 really is infeasible: min_u |x+|^2 / |x|^2 = x1^2 / (x1^2 + |x|^2) = 1/3
+    us = np.linspace(0, 1, 2001)
+    nxt = ex.model.step(np.tile([2.0, 2.0], (us.size, 1)), us[:, None])
+    assert (np.linalg.norm(nxt, axis=1) > 0.5 * np.linalg.norm([2.0, 2.0])).all()
+
+
+def test_grimm_closed_loop_converges_verified():
+    ex = cm.models.load("grimm")
+    model = ex.model
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.5, horizon_max=4)
+    x = ex.x0s[0].copy()
+    for _ in range(60):
+        u = ctrl(x)
+        assert ctrl.last_info["certificate"] == "verified"
+        x = model.step(x, u)
+        assert ((x >= model.X.lo) & (x <= model.X.hi)).all()
+        if np.abs(x).max() < 1e-3:
+            break
+    assert np.abs(x).max() < 1e-3
+
+
+def test_unreachable_contraction_is_proved_infeasible():
+    x = ca.SX.sym("x")
+    u = ca.SX.sym("u")
+    model = cm.Model(x=x, u=u, f=2 * x + u, X=cm.Box([-50], [50]), U=cm.Box([-0.1], [0.1]))
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.9, horizon_max=3)
+    r = ctrl.solve([1.0])
+    assert r.certificate.label == "proved_infeasible"
+    assert r.certificate.proved is False and r.status == cm.Status.DISPROVED
+    proofs = r.certificate.details["proofs"]
+    assert [p["horizon"] for p in proofs] == [1, 2, 3]
+    assert all(p["result"] == "infeasible" for p in proofs)
+    # ground truth: |x_N| >= 2^N - 0.1 (2^N - 1) > 0.9 for every sequence
+    for N in (1, 2, 3):
+        assert 2 ** N - 0.1 * (2 ** N - 1) > 0.9
+    # a fixed horizon gets the same proof
+    r2 = ContractiveMPC(model, horizon=2, alpha=0.9).solve([1.0])
+    assert r2.certificate.label == "proved_infeasible"
+
+
+def test_unreachable_4_state_is_proved_infeasible():
+    x = ca.SX.sym("x", 4)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(1.5 * x[0] + 0.01 * u, 1.2 * x[1] + x[0] ** 2, 0.5 * x[2], x[3] + 0.1 * x[1])
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-9] * 4, [9] * 4), U=cm.Box([-1], [1]))
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.95, norm=np.inf, horizon_max=2)
+    r = ctrl.solve([1.0, 0.0, 0.0, 0.0])
+    assert r.certificate.label == "proved_infeasible"
+
+
+def test_ipopt_failure_is_not_infeasibility():
+    # feasible inputs exist (3 u near pi, i.e. u near 1.047), but IPOPT started at u = 0,
+    # a stationary point of the constraint, fails
+    x = ca.SX.sym("x")
+    u = ca.SX.sym("u")
+    model = cm.Model(x=x, u=u, f=0.5 * x + 0.1 * u, X=cm.Box([-5], [5]), U=cm.Box([-2], [2]))
+    g = ca.cos(3 * u) + 0.9
+    ctrl = ContractiveMPC(model, horizon=1, alpha=1.0, constraints=g,
+                          solver_options={"ipopt.max_iter": 3})
+    r = ctrl.solve([1.0])
+    assert r.certificate.label == "verified"
+    assert np.cos(3 * r.u[0]) + 0.9 <= 0
+    assert r.stats["return_status"] != "Solve_Succeeded"
+
+
+def test_nonzero_equilibrium_reference_3_states():
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * (-ca.sin(x[0]) - 0.5 * x[1] + u),
+                   0.8 * x[2] + 0.2 * x[0])
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-2] * 3, [2] * 3), U=cm.Box([-1.5], [1.5]))
+    a = 0.6
+    x_ref, u_ref = np.array([a, 0.0, a]), np.array([np.sin(a)])
+    ctrl = ContractiveMPC(model, horizon=8, alpha=0.9, x_ref=x_ref, u_ref=u_ref)
+    xk = np.array([-0.5, 0.3, 0.2])
+    for _ in range(150):
+        xk = model.step(xk, ctrl(xk))
+        assert ctrl.last_info["certificate"] in ("verified", "at_reference")
+    assert np.abs(xk - x_ref).max() < 1e-3
+
+
+def test_reference_that_is_not_an_equilibrium_is_refused(cannon):
+    with pytest.raises(ValueError, match="not an equilibrium"):
+        ContractiveMPC(cannon, horizon=3, x_ref=[0.5, 0.0], u_ref=[0.0])
+
+
+@pytest.mark.parametrize("kw, err, match", [
+    ({"alpha": 0.0}, ValueError, "alpha"),
+    ({"alpha": 1.5}, ValueError, "alpha"),
+    ({"alpha": -0.2}, ValueError, "alpha"),
+    ({"horizon": 0}, ValueError, "horizon"),
+    ({"horizon": 2.5}, ValueError, "horizon"),
+    ({"Q": [[1, 2], [0, 1]]}, ValueError, "symmetric"),
+    ({"Q": -np.eye(2)}, ValueError, "semidefinite"),
+    ({"R": 0.0}, ValueError, "positive definite"),
+    ({"R": np.eye(2)}, DimensionError, "R"),
+    ({"Q": np.eye(3)}, DimensionError, "Q"),
+    ({"x_ref": [0, 0, 0]}, DimensionError, "x_ref"),
+    ({"x_ref": [5.0, 0.0]}, ValueError, "outside X"),
+    ({"norm": 3}, ValueError, "norm"),
+    ({"solver": "snopt"}, ValueError, "solver"),
+    ({"mode": "batch"}, ValueError, "mode"),
+    ({"contract": np.ones((1, 3))}, DimensionError, "contract"),
+])
+def test_bad_arguments_are_refused(cannon, kw, err, match):
+    args = {"horizon": 3, "alpha": 0.9}
+    args.update(kw)
+    with pytest.raises(err, match=match):
+        ContractiveMPC(cannon, **args)
+
+
+def test_bad_state_is_refused(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=3)
+    with pytest.raises(DimensionError):
+        ctrl.solve([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="finite"):
+        ctrl.solve([np.nan, 0.0])
+
+
+def test_undefined_model_names_the_operation():
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.1 * ca.log(x[1]), x[1] + 0.1 * u)
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]))
+    with pytest.raises(ModelError, match="OP_LOG"):
+        ContractiveMPC(model, horizon=3)
+
+
+def test_at_reference_applies_u_ref(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=3)
+    r = ctrl.solve([0.0, 0.0])
+    assert r.certificate.label == "at_reference" and np.array_equal(r.u, [0.0])
+
+
+def test_local_law_in_local_set(cannon):
+    ex = cm.models.load("cannon")
+    ctrl = ContractiveMPC(cannon, horizon=4, local_law=ex.local_law, local_set=ex.terminal)
+    x = np.array([0.1, -0.05])
+    assert ex.terminal.contains(x[None, :])[0]
+    r = ctrl.solve(x)
+    assert r.mode == "local_law"
+    np.testing.assert_allclose(r.u, ex.local_law @ x)
+
+
+def test_failed_verification_is_reported(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=3, alpha=0.5)
+    bad = np.full((3, 1), 2.0)  # pushes x away: no contraction
+    ok, details = ctrl._check(np.array([1.0, 1.0]), 3, bad)
+    assert not ok and "contraction" in details["failed"] or "state" in details["failed"]
+
+
+def test_certify_optimal_brackets_the_cost():
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.2 * x[1], x[1] + 0.2 * u)
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-3, -3], [3, 3]), U=cm.Box([-1], [1]))
+    ctrl = ContractiveMPC(model, horizon=2, alpha=0.99, certify_optimal=True,
+                          optimal_eps=1e-3)
+    r = ctrl.solve([1.0, -0.5])
+    br = r.certificate.details["optimal_bracket"]
+    assert br["lower"] <= r.cost + 1e-9
+    assert br["width"] == pytest.approx(br["upper"] - br["lower"])
+    # brute force over a grid of U^2: no feasible grid point beats the certified lower bound
+    g = np.linspace(-1, 1, 201)
+    U1, U2 = np.meshgrid(g, g)
+    best = np.inf
+    for a, b in zip(U1.ravel(), U2.ravel(), strict=True):
+        x1 = model.step([1.0, -0.5], [a])
+        x2 = model.step(x1, [b])
+        if np.linalg.norm(x2) <= 0.99 * np.linalg.norm([1.0, -0.5]):
+            best = min(best, a * a + b * b + x1 @ x1 + x2 @ x2)
+    assert br["lower"] <= best + 1e-9
