@@ -477,6 +477,53 @@ class Model:
         return lambda X: F(as_boxes(X, self.n, "X"))[0]
 
     # ---------------------------------------------------------------- summary
+    def equilibrium(self, u: Any = None, x0: Any = None, w: Any = None,
+                    tol: float = 1e-12) -> np.ndarray:
+        """The state ``x`` with ``f(x, u, w) = x`` near ``x0``, by Newton's method.
+
+        Parameters
+        ----------
+        u : array_like (m,), optional
+            The constant input (default: zeros).
+        x0 : array_like (n,), optional
+            Starting guess (default: the centre of X).
+        w : array_like (l,), optional
+            The disturbance (default: the centre of W).
+        tol : float
+            Required residual ``max |f(x, u, w) - x|``.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+
+        Raises
+        ------
+        ModelError
+            Newton's method did not reach ``tol`` from ``x0`` (try another guess).
+        """
+        uu = np.zeros(self.m) if u is None else as_points(u, self.m, "u")[0][0]
+        xx = self.X.mid if x0 is None else as_points(x0, self.n, "x0")[0][0]
+        ww = (self.W.mid if w is None else as_points(w, self.l, "w")[0][0]) if self.l \
+            else np.zeros(0)
+        z = ca.SX.sym("z", self.n)
+        F = self.function(z, ca.DM(uu), ca.DM(ww)) - z
+        J = ca.Function("newton", [z], [F, ca.jacobian(F, z)])
+        x = np.array(xx, dtype=float)
+        for _ in range(100):
+            r, Jx = J(x)
+            r = np.asarray(r, dtype=float).ravel()
+            if np.abs(r).max() <= tol:
+                return x
+            try:
+                dx = np.linalg.solve(np.asarray(Jx, dtype=float), -r)
+            except np.linalg.LinAlgError:
+                break
+            x = x + dx
+            if not np.isfinite(x).all():
+                break
+        raise ModelError(f"no equilibrium of '{self.name}' found from x0 = {list(xx)} with "
+                         f"u = {list(uu)} (Newton's method did not converge to {tol:g})")
+
     def summary(self) -> str:
         """A short multi-line description: sizes, boxes, detected structure."""
         lines = [

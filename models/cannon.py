@@ -28,6 +28,10 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E8",
+            "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_CANNON.copy(),
+                    "local_set": cannon_terminal()},
+            "run": {"steps": 60, "note": "contractive MPC (N = 10, alpha = 0.9), then u = K x "
+                    "inside T"},
             "section": "4.4.4",
             "equation": "(4.28), terminal (4.29)",
             "figures": ["4.12", "4.13", "4.14", "4.15"],

@@ -42,6 +42,11 @@ def build() -> Example:
         x0s=np.zeros((0, 2)),
         info={
             "example": "E5",
+            "mpc": {"horizon": 20, "alpha": 0.95, "local_law": K_CANNON.copy(),
+                    "local_set": low_complexity_polytope(LEVEL)},
+            "run": {"steps": 200, "x0s": [[2.0, -1.5]],
+                    "note": "contractive MPC, then u = K x inside the terminal polytope; the "
+                            "thesis gives no closed-loop run for E5: x0 = (2, -1.5) is a choice"},
             "section": "4.2.4-4.2.6",
             "equation": "(4.17)",
             "figures": ["4.6", "4.9"],

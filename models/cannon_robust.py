@@ -28,6 +28,13 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E9",
+            "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_CANNON.copy(),
+                    "local_set": cannon_terminal()},
+            "run": {"steps": 60, "disturbance": "uniform",
+                    "note": "certified robust controllable sets are not built yet: the nominal "
+                            "contractive MPC (mu = 0.9 in the prediction) runs with mu drawn "
+                            "uniformly in [0.85, 0.95] at each step; its certificates hold for "
+                            "the nominal mu only"},
             "section": "5.2.5",
             "equation": "(5.22), terminal (5.23)",
             "figures": ["5.3", "5.4", "5.5", "5.6"],

@@ -28,6 +28,12 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E10",
+            "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_CANNON.copy(),
+                    "local_set": cannon_terminal()},
+            "run": {"steps": 60, "disturbance": "uniform",
+                    "note": "nominal contractive MPC (mu = 0.85 in the prediction), mu drawn "
+                            "uniformly in [0.75, 0.95] at each step; certificates hold for the "
+                            "nominal mu only"},
             "section": "6.1.6",
             "equation": "(6.9), terminal (6.10)",
             "figures": ["6.2", "6.3", "6.4", "6.5"],

@@ -38,6 +38,10 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E7",
+            "mpc": {"horizon": None, "alpha": 0.5, "norm": 2, "horizon_max": 4},
+            "run": {"steps": 40, "note": "Alg 4.5: the smallest horizon not proven infeasible "
+                    "is searched at every step; alpha = 0.5 (a choice) makes horizon 1 "
+                    "infeasible from (2, 2)"},
             "section": "4.3.4",
             "equation": "(4.24); MPC (4.22)-(4.23), Alg 4.5",
             "figures": ["4.11"],

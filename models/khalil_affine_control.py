@@ -76,6 +76,12 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E12",
+            "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_LOCAL.copy(),
+                    "local_set": terminal_set()},
+            "run": {"steps": 100, "disturbance": "uniform",
+                    "note": "nominal contractive MPC (w = 0, p = 0.95 in the prediction) with "
+                            "(w, p) drawn uniformly at each step; u = K x inside the chosen "
+                            "(not certified) terminal polytope"},
             "section": "6.3.5",
             "equation": "(6.24); Alg 6.7, MPC (6.22)-(6.23), Alg 6.8",
             "figures": ["6.10", "6.11", "6.12", "6.13", "6.14", "6.15"],

@@ -72,6 +72,12 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E11",
+            "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_LOCAL.copy(),
+                    "local_set": terminal_set()},
+            "run": {"steps": 60, "disturbance": "uniform",
+                    "note": "nominal contractive MPC (w = 0 in the prediction) with w drawn "
+                            "uniformly in [-0.01, 0.01]; u = K x inside the chosen (not "
+                            "certified) terminal polytope"},
             "section": "6.2.5",
             "equation": "(6.14); Alg 6.4, 6.5, 6.6",
             "figures": ["6.6", "6.7", "6.8", "6.9"],

@@ -72,6 +72,10 @@ def build() -> Example:
         x0s=X0S.copy(),
         info={
             "example": "E1",
+            "mpc": {"solver": "lp", "norm": Polytope(*HULL), "alpha": 0.9, "horizon": None,
+                    "horizon_max": 12, "local_law": u_eq, "local_set": terminal},
+            "run": {"steps": 30, "note": "contractive MPC by LP (3.5)-(3.6), gauge of the "
+                    "convex hull of S; the equivalent control u_eq inside S"},
             "section": "3.3.4, 3.4.4",
             "equation": "(3.7); MPC (3.5)-(3.6) and (3.9)-(3.10)",
             "figures": ["3.1", "3.2", "3.3", "3.4"],

@@ -67,6 +67,7 @@ START_POSE = (20.0, 20.0, 0.0)
 TARGET_POSE = (120.0, 90.0, 0.0)
 OBSTACLES = np.array([[55.0, 45.0], [85.0, 70.0]])
 D_MIN = 15.0
+THETA_WEIGHT = 5.0  # cm per rad in the distance to the target pose
 
 
 def state_dim(delay: int = DELAY) -> int:
@@ -106,6 +107,14 @@ def build(delay: int = DELAY) -> Example:
     X = Box(pose_lo * 2 + [-U_MAX] * (2 * (d - 1)), pose_hi * 2 + [U_MAX] * (2 * (d - 1)))
     model = Model(x=z, u=u, f=f, X=X, U=Box([-U_MAX, -U_MAX], [U_MAX, U_MAX]),
                   name="mirosot")
+    # MPC (7.6)-(7.7): distance to the target pose (x, y, THETA_WEIGHT theta) contracts;
+    # keep-out discs of radius D around the obstacles
+    C = np.zeros((3, n))
+    C[0, 0] = C[1, 1] = 1.0
+    C[2, 2] = THETA_WEIGHT
+    Q = C.T @ C
+    avoid = ca.vertcat(*[D_MIN ** 2 - ((z[0] - o[0]) ** 2 + (z[1] - o[1]) ** 2)
+                         for o in OBSTACLES])
     return Example(
         name="mirosot",
         model=model,
@@ -114,6 +123,13 @@ def build(delay: int = DELAY) -> Example:
         x0s=rest_state(START_POSE, d)[None, :],
         info={
             "example": "E13",
+            "mpc": {"horizon": HORIZON, "alpha": ALPHA, "norm": 2, "contract": C, "Q": Q,
+                    "R": 1e-3 * np.eye(2), "x_ref": rest_state(TARGET_POSE, d),
+                    "u_ref": np.zeros(2), "constraints": avoid},
+            "run": {"steps": 60, "obstacles": OBSTACLES.copy(), "D": D_MIN,
+                    "note": "contractive MPC of the distance to the target pose (alpha = "
+                            "0.95, N = 12) with keep-out discs of radius D around the "
+                            "obstacles; the input delay is a state (buffer) of the model"},
             "section": "7.1",
             "equation": "(7.5); MPC (7.6)-(7.7)",
             "figures": ["7.2"],
@@ -139,6 +155,8 @@ def build(delay: int = DELAY) -> Example:
                          "motor voltage",
                 "field": FIELD,
                 "theta_range": (-THETA_MAX, THETA_MAX),
+                "theta_weight": THETA_WEIGHT,
+                "weights": "Q = C' C on the pose error (C: x, y, 5 theta), R = 1e-3 I",
             },
         },
     )

@@ -557,3 +557,15 @@ def test_summary_mentions_sizes(cannon):
     s2 = auto.summary()
     assert "n = 3" in s2 and "m = 0" in s2 and "l = 0" in s2
     assert "W = " not in s2
+
+
+def test_equilibrium_solves_f_x_u_equals_x():
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * (-ca.sin(x[0]) + u), 0.5 * x[2] + x[0] ** 2)
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-2] * 3, [2] * 3), U=cm.Box([-1], [1]))
+    xe = model.equilibrium([0.3], x0=[0.2, 0.0, 0.0])
+    np.testing.assert_allclose(xe, [np.arcsin(0.3), 0.0, 2 * np.arcsin(0.3) ** 2], atol=1e-12)
+    assert np.abs(model.step(xe, [0.3]) - xe).max() <= 1e-12
+    with pytest.raises(cm.ModelError, match="no equilibrium"):
+        model.equilibrium([1.5], x0=[0.2, 0.0, 0.0])  # sin(x0) = 1.5 has no solution

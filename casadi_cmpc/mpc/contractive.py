@@ -502,7 +502,7 @@ class ContractiveMPC:
         self.Q = _weight(Q, n, "Q", definite=False, default=None)
         self.R = _weight(R, m, "R", definite=True, default=None)
         self.P = _weight(P, n, "P", definite=False, default=self.Q)
-        self.w_nominal = (_vector(w_nominal, model.l, "w_nominal", model.W.center)
+        self.w_nominal = (_vector(w_nominal, model.l, "w_nominal", model.W.mid)
                           if model.l else np.zeros(0))
         if model.l and not model.W.contains(self.w_nominal[None, :])[0]:
             raise ValueError(f"w_nominal {self.w_nominal.tolist()} is outside W")
@@ -586,7 +586,8 @@ class ContractiveMPC:
             raise ValueError(
                 f"(x_ref, u_ref) = ({xr.tolist()}, {ur.tolist()}) is not an equilibrium of "
                 f"'{model.name}': f(x_ref, u_ref) - x_ref = {(nxt - xr).tolist()} (largest "
-                f"residual {res:.3g}); pass an equilibrium, e.g. solve f(x, u) = x for u")
+                f"residual {res:.3g}); pass an equilibrium, e.g. x_ref = "
+                "model.equilibrium(u_ref, x0=guess)")
 
     def _path_functions(self, g: Any) -> tuple[ca.Function | None, ca.Function | None]:
         if g is None:
