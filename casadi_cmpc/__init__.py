@@ -14,6 +14,8 @@ from .exceptions import *  # noqa: F401,F403
 from .exceptions import __all__ as _exc_all  # noqa: F401
 from .model import *  # noqa: F401,F403
 from .model import __all__ as _model_all  # noqa: F401
+from .mpc import *  # noqa: F401,F403
+from .mpc import __all__ as _mpc_all  # noqa: F401
 from .sets import *  # noqa: F401,F403
 from .sets import __all__ as _sets_all  # noqa: F401
 from .solvers import *  # noqa: F401,F403
@@ -31,4 +33,4 @@ def __getattr__(name: str):
 
 
 __all__ = (["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)
-           + list(_solvers_all) + list(_control_all))
+           + list(_solvers_all) + list(_control_all) + list(_mpc_all))
