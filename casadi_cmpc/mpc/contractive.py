@@ -62,6 +62,8 @@ class Certificate:
     details : dict
         Numbers: margins of the verified constraints, proofs per horizon (boxes, seconds),
         the optimality bracket when requested.
+    counterexample : ndarray or None
+        A point that disproves the claim, when one was found.
     """
 
     label: str
@@ -69,6 +71,7 @@ class Certificate:
     claim: str
     reason: str
     details: dict = field(default_factory=dict)
+    counterexample: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return f"Certificate({self.label!r}, proved={self.proved}, reason={self.reason!r})"
@@ -92,15 +95,19 @@ class MPCResult(Result):
     u_seq : ndarray (N, m)
         The control sequence (the best available one; see ``certificate``).
     x_pred : ndarray (N + 1, n)
-        Predicted states ``x(0) = x, ..., x(N)`` (float simulation with the nominal w).
+        Predicted states ``x(0) = x, ..., x(N)`` with the nominal w: for a verified
+        sequence the midpoints of the verified enclosures (equal to the float simulation
+        up to rounding), otherwise the float simulation.
     cost : float
         Value of (4.22) at ``u_seq`` (NaN when there is no sequence).
     horizon : int or None
         Horizon ``N`` used.
     certificate : Certificate
     stats : dict
-        ``solver`` (name), ``return_status``, ``iter_count``, ``solve_time`` (s, the local
-        solver), ``verify_time`` (s), ``search_time`` (s), ``horizons_tried``.
+        ``solver`` (name), ``solve_time`` (s, the local solver), ``verify_time`` (s),
+        ``search_time`` (s), ``horizons_tried``; ``return_status``, ``success`` and
+        ``iter_count`` of the local solver when the sequence was not verified, or always
+        with ``solver_stats=True``.
     mode : str
         ``"mpc"``, ``"at_reference"`` or ``"local_law"``.
     """
@@ -269,6 +276,17 @@ def _solver_options(solver: str, user: dict | None) -> tuple[str, dict]:
     if user:
         opts.update(user)
     return plugin, opts
+
+
+def _read_stats(stats: dict) -> None:
+    """Fill ``return_status``, ``success`` and ``iter_count`` from the solver's stats."""
+    fun = stats.pop("_fun", None)
+    if fun is None:
+        return
+    st = fun.stats()
+    stats.update(return_status=st.get("return_status", ""),
+                 success=bool(st.get("success", False)),
+                 iter_count=int(st.get("iter_count", 0)))
 
 
 # ------------------------------------------------------------------------ one horizon
@@ -450,6 +468,10 @@ class ContractiveMPC:
         ``U^N`` (small ``N m`` only); the bracket is in ``certificate.details``.
     solver_options : dict, optional
         Extra options of ``casadi.nlpsol``.
+    solver_stats : bool
+        Read the local solver's statistics (``return_status``, ``iter_count``) also for
+        verified sequences (they are always read when a sequence is not verified; reading
+        them costs about 40 µs after IPOPT).
     backoff : float
         Relative tightening of the constraints given to the local solver (default 1e-6):
         its solution then satisfies the exact constraints with a margin that survives the
@@ -475,7 +497,7 @@ class ContractiveMPC:
                  search_eps: float | None = None, search_max_boxes: int = 20000,
                  search_time_limit: float = 5.0, certify_optimal: bool = False,
                  optimal_eps: float | None = None, solver_options: dict | None = None,
-                 backoff: float = 1e-6) -> None:
+                 backoff: float = 1e-6, solver_stats: bool = False) -> None:
         if not isinstance(model, Model):
             raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
         if model.m == 0:
@@ -553,6 +575,7 @@ class ContractiveMPC:
         self.optimal_eps = optimal_eps
         self.solver_options = dict(solver_options or {})
         self.backoff = float(backoff)
+        self.solver_stats = bool(solver_stats)
         if not 0 <= self.backoff < 0.1:
             raise ValueError(f"backoff must lie in [0, 0.1); got {backoff!r}")
         self._horizons: dict[int, Any] = {}
@@ -690,7 +713,7 @@ class ContractiveMPC:
     def _norm_value(self, e: np.ndarray) -> float:
         if self.gauge is not None:
             P = self.gauge
-            return float(max(0.0, np.max(P.A @ e / P.b)))
+            return float(max(0.0, np.max(P.A @ e / (P.b - P.A @ self.x_ref))))
         return float(np.linalg.norm(e, ord=self.norm))
 
     def _in_local_set(self, x: np.ndarray) -> bool:
@@ -736,17 +759,17 @@ class ContractiveMPC:
             sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lbx=h.lbz, ubx=h.ubz,
                            lbg=h.lbg, ubg=h.ubg)
         dt = time.perf_counter() - t
-        st = h.solver.stats()
-        stats = {"solver": self.solver, "return_status": st.get("return_status", ""),
-                 "success": bool(st.get("success", False)),
-                 "iter_count": int(st.get("iter_count", 0)), "solve_time": dt}
+        stats = {"solver": self.solver, "solve_time": dt, "_fun": h.solver}
         z = np.asarray(sol["x"], dtype=float).ravel()
         if not np.isfinite(z).all():
             self._lam.pop(N, None)
+            _read_stats(stats)
             return None, stats
-        if stats["success"]:
-            self._lam[N] = (sol["lam_x"], sol["lam_g"])
-        u = np.clip(z[:N * m].reshape(N, m), self.model.U.lo, self.model.U.hi)
+        self._lam[N] = (sol["lam_x"], sol["lam_g"])
+        raw = z[:N * m].reshape(N, m)
+        u = np.clip(raw, self.model.U.lo, self.model.U.hi)
+        if np.array_equal(u, raw):
+            stats["_cost"] = float(sol["f"])
         return u, stats
 
     def _local_lp(self, x: np.ndarray, N: int) -> tuple[np.ndarray | None, dict]:
@@ -764,7 +787,14 @@ class ContractiveMPC:
         step = lp.solve(x)
         stats = {"solver": "lp", "return_status": step.status, "success":
                  step.status == "optimal", "iter_count": 0,
-                 "solve_time": time.perf_counter() - t, "lp_proof": step.proof}
+                 "solve_time": time.perf_counter() - t}
+        if step.status == "infeasible" and step.proof is not None:
+            stats["_lp_proof"] = {
+                "horizon": N, "result": "infeasible", "boxes": 0,
+                "elapsed": stats["solve_time"],
+                "how": "exactly checked Farkas certificate of the LP (3.5)-(3.6): "
+                       + str(step.proof.get("statement", "")),
+                "margin": float(step.proof.get("margin", np.nan))}
         if step.status != "optimal":
             return None, stats
         return np.asarray(step.u_seq, dtype=float), stats
@@ -780,7 +810,8 @@ class ContractiveMPC:
         ok = ok_lo & ok_hi
         slack = np.minimum(Y[:, 0] - h.check_lo, h.check_hi - Y[:, 1])
         details = {"min_margin": float(np.min(slack)),
-                   "contraction_upper": float(Y[-1, 1])}
+                   "contraction_upper": float(Y[-1, 1]),
+                   "_x_mid": 0.5 * (Y[:h.n_state_rows, 0] + Y[:h.n_state_rows, 1])}
         if ok.all():
             return True, details
         bad = int(np.flatnonzero(~ok)[0])
@@ -814,10 +845,15 @@ class ContractiveMPC:
         if u is None:
             return None, False, stats, {"failed": "the local solver returned no sequence"}
         if not self.verify:
-            return u, False, stats, {"failed": "verification switched off"}
+            _read_stats(stats)
+            if stats.get("success"):
+                self._warm[N] = u.copy()
+            return u, False, stats, {"failed": "verification switched off (verify=False)"}
         t = time.perf_counter()
         ok, details = self._check(x, N, u)
         stats["verify_time"] = time.perf_counter() - t
+        if not ok or self.solver_stats:
+            _read_stats(stats)
         return u, ok, stats, details
 
     def _solve_fixed(self, x: np.ndarray, r0: float, N: int, t0: float) -> MPCResult:
@@ -826,8 +862,8 @@ class ContractiveMPC:
         if ok:
             return self._verified(x, N, u, stats, details, t0, [])
         proofs: list[dict] = []
-        if self.search != "never":
-            found, proof = self._set_inversion(x, r0, N)
+        if self.search != "never" and self.verify:
+            found, proof = self._prove(x, r0, N, stats)
             proofs.append(proof)
             stats["search_time"] = proof["elapsed"]
             if found is not None:
@@ -849,9 +885,9 @@ class ContractiveMPC:
                 return self._verified(x, N, u, stats, details, t0, proofs)
             if u is not None:
                 last_u, last_stats, last_details = u, stats, details
-            if self.search == "never":
+            if self.search == "never" or not self.verify:
                 continue
-            found, proof = self._set_inversion(x, r0, N)
+            found, proof = self._prove(x, r0, N, stats)
             proofs.append(proof)
             if found is not None:
                 return self._verified(x, N, found, stats, proof.get("details", {}), t0,
@@ -860,11 +896,19 @@ class ContractiveMPC:
                 stats["horizons_tried"] = list(tried)
                 return self._unverified(x, N, u if u is not None else last_u, stats,
                                         details, proofs, t0)
-        if self.search == "never":
+        if self.search == "never" or not self.verify:
             return self._unverified(x, tried[-1], last_u, last_stats, last_details, proofs, t0)
         return self._infeasible(x, tried, last_u, last_stats, proofs, t0)
 
     # set inversion over U^N -------------------------------------------------------
+    def _prove(self, x: np.ndarray, r0: float, N: int, stats: dict
+               ) -> tuple[np.ndarray | None, dict]:
+        """An exact LP infeasibility certificate when the LP gave one, else set inversion."""
+        lp_proof = stats.pop("_lp_proof", None)
+        if lp_proof is not None:
+            return None, lp_proof
+        return self._set_inversion(x, r0, N)
+
     def _set_inversion(self, x: np.ndarray, r0: float, N: int
                        ) -> tuple[np.ndarray | None, dict]:
         """Find a verified sequence or prove that none exists at horizon N."""
@@ -984,8 +1028,14 @@ class ContractiveMPC:
     def _verified(self, x: np.ndarray, N: int, u: np.ndarray, stats: dict, details: dict,
                   t0: float, proofs: list[dict]) -> MPCResult:
         self._warm[N] = u.copy()
-        cost, xp = self._predict(N, u, x)
         details = dict(details)
+        x_mid = details.pop("_x_mid", None)
+        cost = stats.pop("_cost", None)
+        stats.pop("_fun", None)
+        if x_mid is None or cost is None:
+            cost, xp = self._predict(N, u, x)
+        else:
+            xp = np.vstack([x, x_mid.reshape(N, self.model.n)])
         if proofs:
             details["proofs"] = proofs
         w = (f" with the nominal disturbance w = {self.w_nominal.tolist()}"
@@ -1000,7 +1050,7 @@ class ContractiveMPC:
         n_boxes = sum(int(p.get("boxes", 0)) for p in proofs)
         return MPCResult(status=Status.PROVED, message=f"verified at horizon {N}",
                          method=f"contractive_mpc/{self.solver}",
-                         nit=int(stats.get("iter_count", 0)), n_boxes=n_boxes,
+                         nit=int(stats.get("iter_count") or 0), n_boxes=n_boxes,
                          elapsed=time.perf_counter() - t0, x=x, u=u[0].copy(), u_seq=u,
                          x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
 
@@ -1022,6 +1072,8 @@ class ContractiveMPC:
 
     def _unverified(self, x: np.ndarray, N: int, u: np.ndarray | None, stats: dict,
                     details: dict, proofs: list[dict], t0: float) -> MPCResult:
+        stats = {k: v for k, v in stats.items() if not k.startswith("_")}
+        details = {k: v for k, v in details.items() if not k.startswith("_")}
         seq = self._fallback(x, N, u)
         cost, xp = self._predict(N, seq, x)
         budget = any(p.get("budget") for p in proofs)
@@ -1040,7 +1092,7 @@ class ContractiveMPC:
                                                else Status.NUMERICAL)
         return MPCResult(status=status, message=reason or label,
                          method=f"contractive_mpc/{self.solver}",
-                         nit=int(stats.get("iter_count", 0)),
+                         nit=int(stats.get("iter_count") or 0),
                          n_boxes=sum(int(p.get("boxes", 0)) for p in proofs),
                          elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
                          x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
@@ -1048,17 +1100,18 @@ class ContractiveMPC:
     def _infeasible(self, x: np.ndarray, tried: list[int], u: np.ndarray | None,
                     stats: dict, proofs: list[dict], t0: float) -> MPCResult:
         N = tried[-1]
+        stats = {k: v for k, v in stats.items() if not k.startswith("_")}
         seq = self._fallback(x, N, u)
         cost, xp = self._predict(N, seq, x)
         hs = ", ".join(str(k) for k in tried)
         reason = (f"proved: no admissible sequence satisfies the constraints at horizon(s) "
-                  f"{hs} (set inversion over U^N discarded every box)")
+                  f"{hs} (one proof per horizon in details['proofs'])")
         cert = Certificate("proved_infeasible", False,
                            f"a feasible sequence exists at some horizon in {hs}", reason,
                            {"proofs": proofs})
         return MPCResult(status=Status.DISPROVED, message=reason,
                          method=f"contractive_mpc/{self.solver}",
-                         nit=int(stats.get("iter_count", 0)),
+                         nit=int(stats.get("iter_count") or 0),
                          n_boxes=sum(int(p.get("boxes", 0)) for p in proofs),
                          elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
                          x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
@@ -1084,8 +1137,9 @@ class _CheckOnly:
             xs = h.pred_fun(us, x0)
             P = mpc.gauge
             xr = ca.DM(mpc.x_ref)
-            gN = ca.mmax(ca.mtimes(ca.DM(P.A), xs[:, N] - xr) / ca.DM(P.b))
-            g0 = ca.fmax(0, ca.mmax(ca.mtimes(ca.DM(P.A), x0 - xr) / ca.DM(P.b)))
+            scale = ca.DM(P.b - P.A @ mpc.x_ref)  # level 1 of the gauge is the polytope
+            gN = ca.mmax(ca.mtimes(ca.DM(P.A), xs[:, N] - xr) / scale)
+            g0 = ca.fmax(0, ca.mmax(ca.mtimes(ca.DM(P.A), x0 - xr) / scale))
             rows = h.check_fun(z)
             self.check_fun = ca.Function(f"check_{N}", [z],
                                          [ca.vertcat(rows[:-1], gN - mpc.alpha * g0)])

@@ -174,6 +174,39 @@ def test_unreachable_contraction_is_proved_infeasible():
     assert r2.certificate.label == "proved_infeasible"
 
 
+@pytest.mark.parametrize("p", [1, np.inf])
+def test_lp_form_proves_infeasibility_with_farkas_certificates(p):
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(2 * x[0] + 0.1 * x[1], 1.5 * x[1] + u)
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-50, -50], [50, 50]), U=cm.Box([-0.1], [0.1]))
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.9, norm=p, solver="lp", horizon_max=4)
+    r = ctrl.solve([1.0, 0.5])
+    assert r.certificate.label == "proved_infeasible"
+    proofs = r.certificate.details["proofs"]
+    assert [q["horizon"] for q in proofs] == [1, 2, 3, 4]
+    assert all("Farkas" in q["how"] for q in proofs)
+    # ground truth: x1 grows by 2 per step whatever u does, |x(N)|_1 >= |x1(N)| >= 2^N
+    assert 2 ** 1 > 0.9 * 1.5
+
+
+def test_lp_form_is_verified_like_the_nlp():
+    ex = cm.models.load("linear_sliding")
+    ctrl = ContractiveMPC(ex.model, horizon=None, alpha=0.5, norm=ex.info["terminal_hull"],
+                          solver="lp", horizon_max=6)
+    hull = ex.info["terminal_hull"]
+
+    def g(z):
+        return max(0.0, float(np.max(hull.A @ z / hull.b)))
+
+    for x0 in ex.x0s:
+        r = ctrl.solve(x0)
+        assert r.certificate.label == "verified"
+        assert g(r.x_pred[-1]) <= 0.5 * g(np.asarray(x0))
+        for q in r.certificate.details.get("proofs", []):
+            assert q["result"] == "infeasible" and q["horizon"] < r.horizon
+
+
 def test_unreachable_4_state_is_proved_infeasible():
     x = ca.SX.sym("x", 4)
     u = ca.SX.sym("u")
