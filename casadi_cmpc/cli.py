@@ -1,9 +1,13 @@
 """The ``cmpc`` command line.
 
-``cmpc run [EXAMPLE] [--out DIR]`` runs the main job on a thesis example (default
-``cannon_robust``): it prints the model summary and the natural and centered enclosures of one
-step over the example's state, input and disturbance boxes, checks them against sampled true
-successors, and (with ``--out``) writes the figures as JSON.
+``cmpc run [EXAMPLE] [--out DIR]`` is the main job: it loads a thesis example (default
+``cannon_robust``), builds the controller the library has for it (the contractive MPC of
+thesis §4.3 configured in ``example.info["mpc"]``, with its local law inside the terminal set
+where the example has one), simulates the closed loop from the thesis' initial states, checks
+the constraints itself, and prints a summary. With ``--out DIR`` it writes the figures (PNG),
+``summary.json`` and ``report.txt``.
+
+``cmpc list`` prints the example names.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,12 +26,90 @@ __all__ = ["main"]
 DEFAULT_EXAMPLE = "cannon_robust"
 
 
-def _fmt_box(b: np.ndarray) -> str:
-    return " x ".join(f"[{lo:.6g}, {hi:.6g}]" for lo, hi in b)
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _jsonable(v.tolist())
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if np.isfinite(f) else None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.bool_,)):
+        return bool(v)
+    return v
 
 
-def _run(name: str, out: str | None, samples: int, seed: int) -> int:
+def _obstacle_distances(traj: Any, run: dict) -> np.ndarray | None:
+    obs = run.get("obstacles")
+    if obs is None:
+        return None
+    obs = np.asarray(obs, dtype=float)
+    d = np.linalg.norm(traj.x[:, None, :2] - obs[None, :, :], axis=2)
+    return d.min(axis=1)
+
+
+def _controller(ex: Any) -> Any:
+    from .mpc.contractive import ContractiveMPC
+
+    return ContractiveMPC(ex.model, **ex.info["mpc"])
+
+
+def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .plot import plot_trajectory
+
+    names = ex.info.get("state_names") or ex.info.get("state_layout")
+    sets: dict[str, Any] = {}
+    if ex.terminal is not None:
+        sets["terminal set"] = ex.terminal
+    obstacles = None
+    if run.get("obstacles") is not None:
+        obstacles = [(o[0], o[1], run["D"]) for o in np.asarray(run["obstacles"])]
+    written = []
+    fig, ax = plt.subplots(figsize=(6.4, 5.2))
+    for i, traj in enumerate(trajs, start=1):
+        before = set(ax.lines)
+        plot_trajectory(traj, ax=ax, sets=sets or None, obstacles=obstacles,
+                        state_names=names)
+        sets, obstacles = {}, None  # draw them once
+        for line in set(ax.lines) - before:
+            if line.get_label() == "trajectory":
+                line.set_label(f"run {i}" if len(trajs) > 1 else "trajectory")
+                line.set_color(f"C{i - 1}")
+    handles, labels = ax.get_legend_handles_labels()
+    keep = {lab: h for h, lab in zip(handles, labels, strict=True)}
+    ax.legend(list(keep.values()), list(keep.keys()), fontsize=8, loc="best")
+    ax.set_title(f"{ex.name}: closed loop ({ex.info.get('example', '')})")
+    path = out / "phase_plane.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    written.append(path.name)
+    for i, traj in enumerate(trajs, start=1):
+        fig = plot_trajectory(
+            traj, sets={"terminal set": ex.terminal} if ex.terminal is not None else None,
+            obstacles=[(o[0], o[1], run["D"]) for o in np.asarray(run["obstacles"])]
+            if run.get("obstacles") is not None else None,
+            state_names=names,
+            title=f"{ex.name}: run {i} from x0 = {np.round(traj.x[0], 4).tolist()}")
+        path = out / f"run{i}.png"
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        written.append(path.name)
+    return written
+
+
+def _run(name: str, out: str | None, steps: int | None, seed: int,
+         progress: bool | None) -> int:
     from . import models
+    from .mpc.simulate import simulate
 
     try:
         ex = models.load(name)
@@ -34,61 +117,133 @@ def _run(name: str, out: str | None, samples: int, seed: int) -> int:
         print(f"cmpc: {exc}", file=sys.stderr)
         return 2
     model = ex.model
+    run = dict(ex.info.get("run", {}))
     print(model.summary())
-    X = model.X.as_array()
-    U = model.U.as_array()
-    args = (X, U, model.W_box.as_array()) if model.l else (X, U)
-    report: dict = {"example": name, "n": model.n, "m": model.m, "l": model.l}
-    rng = np.random.default_rng(seed)
-    xs = model.X.sample(samples, rng)
-    us = model.U.sample(samples, rng) if model.m else None
-    ws = model.W.sample(samples, rng) if model.W is not None else None
-    succ = model.step(xs, us, ws)
-    print(f"\nOne step over X x U{' x W' if model.l else ''} "
-          f"({samples} sampled successors checked):")
-    for kind in ("natural", "centered"):
-        F = model.inclusion(kind)
-        t0 = time.perf_counter()
-        Y = F(*args)[0]
-        dt = time.perf_counter() - t0
-        inside = bool(((succ >= Y[:, 0]) & (succ <= Y[:, 1])).all())
-        print(f"  {kind:9s} {_fmt_box(Y)}   (all samples inside: {inside})")
-        report[kind] = {"enclosure": Y.tolist(), "samples_inside": inside,
-                        "seconds": dt}
-        if not inside:
-            print(f"cmpc: the {kind} enclosure misses a sampled successor", file=sys.stderr)
-            return 1
-    width_n = np.diff(np.asarray(report["natural"]["enclosure"]), axis=1).ravel()
-    width_c = np.diff(np.asarray(report["centered"]["enclosure"]), axis=1).ravel()
-    print(f"  widths: natural {np.array2string(width_n, precision=4)}, "
-          f"centered {np.array2string(width_c, precision=4)}")
+    t_build = time.perf_counter()
+    ctrl = _controller(ex)
+    t_build = time.perf_counter() - t_build
+    print(f"\ncontroller: {ctrl!r}")
+    if run.get("note"):
+        print(f"  {run['note']}")
+    n_steps = int(steps if steps is not None else run.get("steps", 50))
+    x0s = np.asarray(run.get("x0s", ex.x0s), dtype=float).reshape(-1, model.n)
+    disturbance = run.get("disturbance")
+    trajs, runs = [], []
+    x_ref = ctrl.x_ref
+    for i, x0 in enumerate(x0s, start=1):
+        ctrl.reset()
+        print(f"\nrun {i}: x0 = {x0.tolist()}, {n_steps} steps"
+              + (f", disturbance {disturbance}" if disturbance else ""))
+        traj = simulate(model, ctrl, x0, n_steps, disturbance=disturbance, seed=seed + i - 1,
+                        progress=progress)
+        trajs.append(traj)
+        s = traj.summary()
+        dist = float(np.abs(ctrl.contract @ (traj.x[-1] - x_ref)).max())
+        certs = s.get("certificates", {})
+        info = {"x0": x0, "final_state": traj.x[-1], "final_distance_to_reference": dist,
+                "steps": traj.steps, "stop_reason": traj.stop_reason,
+                "violations": {"state": int(traj.violations["state"]),
+                               "input": int(traj.violations["input"])},
+                "certificates": certs, "horizon_per_step": list(traj.horizon),
+                "solve_time": s.get("solve_time"), "disturbance": traj.disturbance}
+        dmin = _obstacle_distances(traj, run)
+        if dmin is not None:
+            info["min_obstacle_distance"] = float(dmin.min())
+            info["obstacle_violations"] = int((dmin < run["D"]).sum())
+        runs.append(info)
+        st = s.get("solve_time") or {}
+        med = st.get("median")
+        print(f"  final state {np.round(traj.x[-1], 6).tolist()} "
+              f"(|C (x - x_ref)|_inf = {dist:.3g})")
+        print(f"  certificates: {certs}")
+        print(f"  violations: state {info['violations']['state']}, input "
+              f"{info['violations']['input']}"
+              + (f", obstacle {info['obstacle_violations']} (min distance "
+                 f"{info['min_obstacle_distance']:.3g}, D = {run['D']})" if dmin is not None
+                 else ""))
+        if med is not None:
+            print(f"  solve time per step: median {med * 1e3:.3g} ms, max "
+                  f"{st.get('max', 0) * 1e3:.3g} ms")
+    total_viol = sum(r["violations"]["state"] + r["violations"]["input"]
+                     + r.get("obstacle_violations", 0) for r in runs)
+    summary = {"example": name, "thesis_example": ex.info.get("example"),
+               "controller": repr(ctrl), "note": run.get("note", ""),
+               "controller_build_time": t_build, "steps": n_steps, "seed": seed,
+               "runs": runs, "total_violations": total_viol}
     if out:
         d = Path(out)
         d.mkdir(parents=True, exist_ok=True)
-        (d / "run.json").write_text(json.dumps(report, indent=2))
-        print(f"\nwritten: {d / 'run.json'}")
+        figs = _figures(ex, trajs, run, d)
+        summary["figures"] = figs
+        (d / "summary.json").write_text(json.dumps(_jsonable(summary), indent=2))
+        (d / "report.txt").write_text(_report(ex, ctrl, summary))
+        print(f"\nwritten to {d}: {', '.join(figs + ['summary.json', 'report.txt'])}")
+    if total_viol:
+        print(f"cmpc: {total_viol} constraint violations in the closed loop", file=sys.stderr)
+        return 1
     return 0
+
+
+def _report(ex: Any, ctrl: Any, summary: dict) -> str:
+    lines = [f"cmpc run {ex.name} ({ex.info.get('example', '')}, thesis §"
+             f"{ex.info.get('section', '')})", "", ex.model.summary(), "",
+             f"controller: {summary['controller']}"]
+    if summary["note"]:
+        lines.append(f"  {summary['note']}")
+    for i, r in enumerate(summary["runs"], start=1):
+        lines += ["", f"run {i}: x0 = {np.asarray(r['x0']).tolist()}, {r['steps']} steps "
+                      f"({r['stop_reason']}), disturbance {r['disturbance']}",
+                  f"  final state {np.round(np.asarray(r['final_state']), 6).tolist()}, "
+                  f"|C (x - x_ref)|_inf = {r['final_distance_to_reference']:.3g} (C: the "
+                  "contracted components)",
+                  f"  certificates per step: {r['certificates']}",
+                  f"  violations counted by the simulator: {r['violations']}"]
+        if "min_obstacle_distance" in r:
+            lines.append(f"  smallest obstacle distance {r['min_obstacle_distance']:.4g} "
+                         f"(required >= {ex.info['run']['D']})")
+        hs = [h for h in r["horizon_per_step"] if h is not None]
+        if hs:
+            vals, cnt = np.unique(hs, return_counts=True)
+            lines.append("  horizons used: " + ", ".join(
+                f"N = {v}: {c} steps" for v, c in zip(vals, cnt, strict=True)))
+        st = r.get("solve_time") or {}
+        if st.get("median") is not None:
+            lines.append(f"  solve time: median {st['median'] * 1e3:.3g} ms, max "
+                         f"{st['max'] * 1e3:.3g} ms")
+    lines += ["", "'verified': the applied sequence was re-evaluated in interval arithmetic "
+              "from the exact state and satisfies X, U, the contraction and the extra "
+              "constraints (for the nominal disturbance when the model has one); "
+              "'local_law': the state was inside the local set and the local law was applied; "
+              "other labels claim nothing.", ""]
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cmpc`` console script."""
-    parser = argparse.ArgumentParser(prog="cmpc", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="cmpc", description=__doc__.split("\n\n")[1])
     sub = parser.add_subparsers(dest="command", required=True)
-    p_run = sub.add_parser("run", help="run the main job on a thesis example")
+    p_run = sub.add_parser("run", help="simulate the closed loop of a thesis example")
     p_run.add_argument("example", nargs="?", default=DEFAULT_EXAMPLE,
                        help=f"example name (default: {DEFAULT_EXAMPLE}); see 'cmpc list'")
-    p_run.add_argument("--out", default=None, help="directory for the JSON results")
-    p_run.add_argument("--samples", type=int, default=10000,
-                       help="number of sampled successors to check (default 10000)")
-    p_run.add_argument("--seed", type=int, default=0)
+    p_run.add_argument("--out", default=None,
+                       help="directory for the figures, summary.json and report.txt")
+    p_run.add_argument("--steps", type=int, default=None,
+                       help="closed-loop steps per initial state (default: the example's)")
+    p_run.add_argument("--seed", type=int, default=0, help="seed of the disturbances")
+    p_run.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("list", help="list the example names")
     args = parser.parse_args(argv)
     if args.command == "list":
         from . import models
 
-        print("\n".join(models.names()))
+        for n in models.names():
+            ex_doc = models.load(n).info.get("example", "")
+            print(f"{n:24s} {ex_doc}")
         return 0
-    return _run(args.example, args.out, args.samples, args.seed)
+    if args.steps is not None and args.steps < 1:
+        parser.error("--steps must be at least 1")
+    return _run(args.example, args.out, args.steps, args.seed,
+                False if args.no_progress else None)
 
 
 if __name__ == "__main__":  # pragma: no cover
