@@ -99,6 +99,11 @@ def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
             if run.get("obstacles") is not None else None,
             state_names=names,
             title=f"{ex.name}: run {i} from x0 = {np.round(traj.x[0], 4).tolist()}")
+        for a in fig.axes:
+            handles, labels = a.get_legend_handles_labels()
+            if a.get_legend() is not None and len(set(labels)) < len(labels):
+                keep = {lab: h for h, lab in zip(handles, labels, strict=True)}
+                a.legend(list(keep.values()), list(keep.keys()), fontsize=8)
         path = out / f"run{i}.png"
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
@@ -118,6 +123,15 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
         return 2
     model = ex.model
     run = dict(ex.info.get("run", {}))
+    if out:
+        try:
+            Path(out).mkdir(parents=True, exist_ok=True)
+            probe = Path(out) / ".cmpc_write_test"
+            probe.write_text("")
+            probe.unlink()
+        except OSError as exc:
+            print(f"cmpc: cannot write to --out {out}: {exc}", file=sys.stderr)
+            return 2
     print(model.summary())
     t_build = time.perf_counter()
     ctrl = _controller(ex)

@@ -71,3 +71,11 @@ def test_list_names_every_example(capsys):
 def test_missing_command_is_an_error():
     with pytest.raises(SystemExit):
         main([])
+
+
+def test_unwritable_out_is_refused_before_running(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["run", "grimm", "--out", str(blocker / "sub"), "--no-progress"]) == 2
+    captured = capsys.readouterr()
+    assert "cannot write" in captured.err and "run 1" not in captured.out

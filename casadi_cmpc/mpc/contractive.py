@@ -35,6 +35,8 @@ from ..solvers.result import Result
 __all__ = ["Certificate", "ContractiveMPC", "MPCResult"]
 
 _SOLVERS = ("ipopt", "sqp", "lp")
+#: Contracted distances below this are treated as 0 (their reciprocal would overflow).
+_TINY = 1e-250
 _MODES = ("receding", "sequence")
 
 
@@ -145,6 +147,8 @@ def _norm(norm: Any) -> float:
 
 
 def _alpha(alpha: Any) -> float:
+    if isinstance(alpha, (str, bytes)):
+        raise ValueError(f"alpha must be a number in (0, 1], not the string {alpha!r}")
     try:
         a = float(alpha)
     except (TypeError, ValueError):
@@ -196,6 +200,8 @@ def _vector(v: Any, d: int, name: str, default: np.ndarray) -> np.ndarray:
 
 
 def _state(x: Any, n: int, name: str = "x") -> np.ndarray:
+    if x is None or isinstance(x, (str, bytes)):
+        raise TypeError(f"{name} must be a numeric array of {n} elements; got {x!r}")
     try:
         a = np.asarray(x, dtype=float)
     except (TypeError, ValueError):
@@ -284,95 +290,168 @@ def _read_stats(stats: dict) -> None:
     if fun is None:
         return
     st = fun.stats()
+    it = st.get("iter_count", 0)
+    it = int(it) if isinstance(it, (int, np.integer)) and 0 <= it < 10 ** 7 else 0
     stats.update(return_status=st.get("return_status", ""),
-                 success=bool(st.get("success", False)),
-                 iter_count=int(st.get("iter_count", 0)))
+                 success=bool(st.get("success", False)), iter_count=it)
 
 
 # ------------------------------------------------------------------------ one horizon
+class _Consts:
+    """Constants of a graph: DM numbers (float graph) or symbols with recorded values.
+
+    The exact graph keeps every constant as a symbol, so that CasADi cannot fold products
+    of constants in floating point while the model is composed with itself; the recorded
+    values enter the interval evaluation as thin intervals.
+    """
+
+    def __init__(self, exact: bool) -> None:
+        self.exact = exact
+        self.syms: list[ca.SX] = []
+        self.vals: list[np.ndarray] = []
+
+    def __call__(self, value: Any, name: str) -> Any:
+        a = np.asarray(value, dtype=float)
+        if not self.exact:
+            return float(a) if a.ndim == 0 else ca.DM(a)
+        shape = (1, 1) if a.ndim == 0 else ((a.size, 1) if a.ndim == 1 else a.shape)
+        sym = ca.SX.sym(name, *shape)
+        self.syms.append(ca.vec(sym))
+        self.vals.append(np.reshape(a, shape).ravel(order="F"))
+        return sym
+
+    def function(self, fun: ca.Function, name: str) -> Any:
+        """A callable ``(*args) -> list of outputs`` equal to ``fun`` with its literals as
+        constants of this graph."""
+        if not self.exact:
+            return lambda *args: fun.call(list(args))
+        from ..interval._derivative import ParamGraph
+
+        pg = ParamGraph(fun)
+        g = ca.Function(name, pg.inputs + [pg.params], pg.outputs)
+        cp = self(pg.values, f"{name}_lit")
+        return lambda *args: g.call(list(args) + [cp])
+
+    @property
+    def params(self) -> ca.SX:
+        return ca.vertcat(*self.syms) if self.syms else ca.SX(0, 1)
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.concatenate(self.vals) if self.vals else np.zeros(0)
+
+
+def _graph(mpc: ContractiveMPC, N: int, exact: bool) -> dict[str, Any]:
+    """Prediction, cost (4.22), constraint rows and contraction value at horizon N."""
+    model = mpc.model
+    n, m = model.n, model.m
+    K = _Consts(exact)
+    us = ca.SX.sym("u", N * m)
+    x0 = ca.SX.sym("x0", n)
+    f = K.function(model.function, "f")
+    w = K(mpc.w_nominal, "w_nom") if model.l else ca.DM.zeros(0, 1)
+    xs = [x0]
+    for i in range(N):
+        xs.append(f(xs[-1], us[i * m:(i + 1) * m], w)[0])
+    xr, ur = K(mpc.x_ref, "x_ref"), K(mpc.u_ref, "u_ref")
+    Q, R, P = K(mpc.Q, "Q"), K(mpc.R, "R"), K(mpc.P, "P")
+    cost = 0
+    for i in range(N):
+        v = us[i * m:(i + 1) * m] - ur
+        e = xs[i + 1] - xr
+        cost = cost + ca.mtimes([v.T, R, v]) + ca.mtimes([e.T, P if i == N - 1 else Q, e])
+    C = K(mpc.contract, "C")
+    eN = ca.mtimes(C, xs[N] - xr)
+    e0 = ca.mtimes(C, x0 - xr)
+    parts, lo, hi, labels = [], [], [], []
+    for i in range(1, N + 1):
+        parts.append(xs[i])
+        lo.append(model.X.lo)
+        hi.append(model.X.hi)
+        labels += [f"state x{j + 1}({i}) in X" for j in range(n)]
+    g_x, g_xu = mpc._path
+    gx = K.function(g_x, "g_x") if g_x is not None else None
+    gxu = K.function(g_xu, "g_xu") if g_xu is not None else None
+    for i in range(N):
+        if gxu is not None:
+            parts.append(gxu(xs[i], us[i * m:(i + 1) * m])[0])
+            k = g_xu.numel_out(0)
+            lo.append(np.full(k, -np.inf))
+            hi.append(np.zeros(k))
+            labels += [f"constraint g_xu[{j}](x({i}), u({i})) <= 0" for j in range(k)]
+        if gx is not None:
+            parts.append(gx(xs[i + 1])[0])
+            k = g_x.numel_out(0)
+            lo.append(np.full(k, -np.inf))
+            hi.append(np.zeros(k))
+            labels += [f"constraint g_x[{j}](x({i + 1})) <= 0" for j in range(k)]
+    if mpc.terminal is not None:
+        Ht, ht = mpc.terminal.A, mpc.terminal.b
+        parts.append(ca.mtimes(K(Ht, "H"), xs[N]) - K(ht, "h"))
+        lo.append(np.full(Ht.shape[0], -np.inf))
+        hi.append(np.zeros(Ht.shape[0]))
+        labels += [f"terminal row {r}: H x({N}) <= h" for r in range(Ht.shape[0])]
+    alpha = K(mpc.alpha, "alpha")
+    if mpc.gauge is not None:
+        Pa, Pb = K(mpc.gauge.A, "gauge_A"), K(mpc.gauge.b, "gauge_b")
+        scale = Pb - ca.mtimes(Pa, xr)  # the gauge's level 1 is the polytope
+        gN = ca.mmax(ca.mtimes(Pa, xs[N] - xr) / scale)
+        g0 = ca.fmax(0, ca.mmax(ca.mtimes(Pa, x0 - xr) / scale))
+        c_val = gN - alpha * g0
+    elif mpc.norm == 2:
+        c_val = ca.sqrt(ca.sumsqr(eN)) - alpha * ca.sqrt(ca.sumsqr(e0))
+    elif mpc.norm == 1:
+        c_val = ca.sum1(ca.fabs(eN)) - alpha * ca.sum1(ca.fabs(e0))
+    else:
+        c_val = ca.mmax(ca.fabs(eN)) - alpha * ca.mmax(ca.fabs(e0))
+    labels.append("contraction ||C (x(N) - x_ref)|| - alpha ||C (x(k) - x_ref)|| <= 0")
+    return {"us": us, "x0": x0, "xs": xs, "cost": cost, "eN": eN,
+            "common": ca.vertcat(*parts), "c_lo": np.concatenate(lo),
+            "c_hi": np.concatenate(hi), "c_val": c_val, "labels": labels,
+            "params": K.params, "values": K.values}
+
+
 class _Horizon:
-    """NLP, verification function and search function of one horizon N."""
+    """NLP (float graph) and verification/search functions (exact graph) of horizon N."""
 
     def __init__(self, mpc: ContractiveMPC, N: int, nlp: bool = True) -> None:
         self.N = N
         model = mpc.model
         n, m = model.n, model.m
         self.n, self.m = n, m
-        us = ca.SX.sym("u", N * m)
-        x0 = ca.SX.sym("x0", n)
-        fun = model.function
-        w = ca.DM(mpc.w_nominal) if model.l else ca.DM.zeros(0, 1)
-        xs = [x0]
-        for i in range(N):
-            xs.append(fun(xs[-1], us[i * m:(i + 1) * m], w))
-        xr = ca.DM(mpc.x_ref)
-        ur = ca.DM(mpc.u_ref)
-        C = ca.DM(mpc.contract)
-        # cost (4.22)
-        cost = 0
-        for i in range(N):
-            v = us[i * m:(i + 1) * m] - ur
-            cost = cost + ca.mtimes([v.T, ca.DM(mpc.R), v])
-            e = xs[i + 1] - xr
-            W = mpc.P if i == N - 1 else mpc.Q
-            cost = cost + ca.mtimes([e.T, ca.DM(W), e])
-        eN = ca.mtimes(C, xs[N] - xr)
-        e0 = ca.mtimes(C, x0 - xr)
-        q = mpc.contract.shape[0]
-        p = mpc.norm
-        # -- the constraint vector shared by NLP, verification and search:
-        #    [x_1..x_N (in X); path constraints (<= 0); terminal rows (<= 0)]
-        parts, lo, hi = [], [], []
-        Xlo, Xhi = model.X.lo, model.X.hi
-        for i in range(1, N + 1):
-            parts.append(xs[i])
-            lo.append(Xlo)
-            hi.append(Xhi)
-        g_x, g_xu = mpc._path
-        for i in range(N):
-            if g_xu is not None:
-                parts.append(g_xu(xs[i], us[i * m:(i + 1) * m]))
-                k = g_xu.numel_out(0)
-                lo.append(np.full(k, -np.inf))
-                hi.append(np.zeros(k))
-            if g_x is not None:
-                parts.append(g_x(xs[i + 1]))
-                k = g_x.numel_out(0)
-                lo.append(np.full(k, -np.inf))
-                hi.append(np.zeros(k))
-        if mpc.terminal is not None:
-            H, h = mpc.terminal.A, mpc.terminal.b
-            parts.append(ca.mtimes(ca.DM(H), xs[N]) - ca.DM(h))
-            lo.append(np.full(H.shape[0], -np.inf))
-            hi.append(np.zeros(H.shape[0]))
-        common = ca.vertcat(*parts)
-        c_lo, c_hi = np.concatenate(lo), np.concatenate(hi)
-        # exact contraction value for the certificate: ||C e_N||_p - alpha ||C e_0||_p <= 0
-        if p == 2:
-            c_val = ca.sqrt(ca.sumsqr(eN)) - mpc.alpha * ca.sqrt(ca.sumsqr(e0))
-        elif p == 1:
-            c_val = ca.sum1(ca.fabs(eN)) - mpc.alpha * ca.sum1(ca.fabs(e0))
-        else:
-            c_val = ca.mmax(ca.fabs(eN)) - mpc.alpha * ca.mmax(ca.fabs(e0))
-        self.check_fun = ca.Function(f"check_{N}", [ca.vertcat(us, x0)],
-                                     [ca.vertcat(common, c_val)])
-        self.check_lo = np.concatenate([c_lo, [-np.inf]])
-        self.check_hi = np.concatenate([c_hi, [0.0]])
+        # -- exact graph: the certificate, the search over U^N, the optimality bracket
+        ex = _graph(mpc, N, exact=True)
+        z = ca.vertcat(ex["us"], ex["x0"], ex["params"])
+        self.param_values = ex["values"]
+        self.check_fun = ca.Function(f"check_{N}", [z], [ca.vertcat(ex["common"],
+                                                                     ex["c_val"])])
+        self.check_lo = np.concatenate([ex["c_lo"], [-np.inf]])
+        self.check_hi = np.concatenate([ex["c_hi"], [0.0]])
+        self.labels = ex["labels"]
         self.n_state_rows = n * N
-        self.cost_fun = ca.Function(f"cost_{N}", [ca.vertcat(us, x0)], [cost])
+        self.exact_cost = ca.Function(f"cost_{N}", [z], [ex["cost"]])
+        self._check_incl: InclusionFunction | None = None
+        # -- float graph: the local solver, predictions and ranking of candidates
+        fl = _graph(mpc, N, exact=False)
+        us, x0, xs, cost = fl["us"], fl["x0"], fl["xs"], fl["cost"]
+        self.cost_fun = ca.Function(f"costf_{N}", [ca.vertcat(us, x0)], [cost])
         self.pred_fun = ca.Function(f"pred_{N}", [us, x0], [ca.horzcat(*xs)])
         self.cost_pred = ca.Function(f"costpred_{N}", [us, x0], [cost, ca.horzcat(*xs)])
-        self._check_incl: InclusionFunction | None = None
         self._batch: dict[int, ca.Function] = {}
-        # -- the NLP: contraction scaled by s = 1 / ||C e_0||_p, tightened by backoff
+        self.solver = None
+        if not nlp:
+            return
+        # the NLP: contraction scaled by s = 1 / ||C e_0||_p, constraints tightened
+        eN = fl["eN"]
+        q = mpc.contract.shape[0]
         b = mpc.backoff
         s = ca.SX.sym("s")
         a_eff = mpc.alpha * (1.0 - b)
         extra_x = ca.SX.sym("t", 0)
-        if p == 2:
+        if mpc.norm == 2:
             c_nlp = s * s * ca.sumsqr(eN)
             cl, ch = [-np.inf], [a_eff ** 2]
-        elif p == math.inf:
+        elif mpc.norm == math.inf:
             c_nlp = s * eN
             cl, ch = [-a_eff] * q, [a_eff] * q
         else:
@@ -380,29 +459,34 @@ class _Horizon:
             c_nlp = ca.vertcat(s * eN - extra_x, -s * eN - extra_x, ca.sum1(extra_x))
             cl = [-np.inf] * (2 * q + 1)
             ch = [0.0] * (2 * q) + [a_eff]
-        width = np.concatenate([np.tile(model.X.hi - model.X.lo, N),
-                                np.zeros(c_lo.size - n * N)])
-        tight = b * np.maximum(width, 1.0)
+        tight = b * np.concatenate([np.tile(model.X.hi - model.X.lo, N),
+                                    np.tile(mpc._path_scale, N), mpc._terminal_scale])
+        c_lo, c_hi = fl["c_lo"], fl["c_hi"]
         g_lo = np.where(np.isfinite(c_lo), c_lo + tight, c_lo)
         g_hi = np.where(np.isfinite(c_hi), c_hi - tight, c_hi)
         self.lbg = np.concatenate([g_lo, cl])
         self.ubg = np.concatenate([g_hi, ch])
-        z = ca.vertcat(us, extra_x)
-        self.n_z = z.numel()
+        zz = ca.vertcat(us, extra_x)
+        self.n_z = zz.numel()
         self.lbz = np.concatenate([np.tile(model.U.lo, N), np.zeros(extra_x.numel())])
         self.ubz = np.concatenate([np.tile(model.U.hi, N), np.full(extra_x.numel(), np.inf)])
-        self.nlp = {"x": z, "p": ca.vertcat(x0, s), "f": cost,
-                    "g": ca.vertcat(common, c_nlp)}
-        self.solver = None
-        if nlp:
-            plugin, opts = _solver_options(mpc.solver, mpc.solver_options)
-            self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", plugin, self.nlp, opts)
+        self.nlp = {"x": zz, "p": ca.vertcat(x0, s), "f": cost,
+                    "g": ca.vertcat(fl["common"], c_nlp)}
+        plugin, opts = _solver_options(mpc.solver, mpc.solver_options)
+        self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", plugin, self.nlp, opts)
 
     @property
     def check_inclusion(self) -> InclusionFunction:
         if self._check_incl is None:
             self._check_incl = InclusionFunction(self.check_fun, "natural")
         return self._check_incl
+
+    def z(self, useqs: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Rows ``[u_seq, x, constants]`` of the exact graph's input, shape (K, dim)."""
+        k = useqs.shape[0]
+        return np.concatenate([useqs, np.broadcast_to(x, (k, x.size)),
+                               np.broadcast_to(self.param_values,
+                                               (k, self.param_values.size))], axis=1)
 
 
 # ------------------------------------------------------------------------- controller
@@ -548,6 +632,7 @@ class ContractiveMPC:
         self.terminal = terminal
         self._path = self._path_functions(constraints)
         self.constraints = constraints
+        self._path_scale, self._terminal_scale = self._scales()
         self.local_law = local_law
         self.local_set = local_set if local_set is not None else terminal
         self._law = self._law_function(local_law) if local_law is not None else None
@@ -566,7 +651,8 @@ class ContractiveMPC:
             raise ValueError(f"search must be 'auto', 'always' or 'never'; got {search!r}")
         self.search = search
         widest = float((model.U.hi - model.U.lo).max())
-        self.search_eps = float(search_eps) if search_eps is not None else widest / 64
+        self.search_eps = (float(search_eps) if search_eps is not None
+                           else (widest / 64 if widest > 0 else 1.0))
         if not self.search_eps > 0:
             raise ValueError(f"search_eps must be positive; got {search_eps!r}")
         self.search_max_boxes = int(search_max_boxes)
@@ -581,7 +667,7 @@ class ContractiveMPC:
         self._horizons: dict[int, Any] = {}
         self._warm: dict[int, np.ndarray] = {}
         self._lam: dict[int, tuple[Any, Any]] = {}
-        self._queue: list[np.ndarray] = []
+        self._queue: list[tuple[np.ndarray, np.ndarray, MPCResult]] = []
         self.last_result: MPCResult | None = None
         self.last_info: dict | None = None
         if solver == "lp":
@@ -590,6 +676,8 @@ class ContractiveMPC:
     # ------------------------------------------------------------------ set-up helpers
     @staticmethod
     def _int(v: Any, name: str) -> int:
+        if isinstance(v, (str, bytes)):
+            raise ValueError(f"{name} must be an integer >= 1, not the string {v!r}")
         if isinstance(v, (bool, np.bool_)) or not float(v).is_integer():
             raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
         k = int(v)
@@ -636,6 +724,23 @@ class ContractiveMPC:
         fxu = ca.Function("g_xu", [model.x, model.u], [ca.vertcat(*gxu)]) if gxu else None
         return fx, fxu
 
+    def _scales(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ranges of the path constraints over X x U and of the terminal rows over X: the
+        local solver's constraints are tightened by ``backoff`` times these."""
+        model = self.model
+        parts = []
+        X, U = model.X.as_array(), model.U.as_array()
+        for fun, args in ((self._path[1], (X, U)), (self._path[0], (X,))):
+            if fun is None:
+                continue
+            Y = InclusionFunction(fun, "natural")(*args)[0][0]
+            w = Y[:, 1] - Y[:, 0]
+            parts.append(np.where(np.isfinite(w) & (w > 0), w, 1.0))
+        path = np.concatenate(parts) if parts else np.zeros(0)
+        term = (np.abs(self.terminal.A) @ (model.X.hi - model.X.lo)
+                if self.terminal is not None else np.zeros(0))
+        return path, term
+
     def _law_function(self, law: Any) -> ca.Function:
         model = self.model
         if isinstance(law, ca.SX):
@@ -652,6 +757,25 @@ class ContractiveMPC:
     def _setup_lp(self) -> None:
         if not self.model.is_linear:
             raise ModelError("solver='lp' needs a linear model (x+ = A x + B u)")
+        if not np.array_equal(self.contract, np.eye(self.model.n)):
+            raise ValueError("solver='lp' contracts the whole state (contract must be the "
+                             "identity); use solver='ipopt' for a contraction matrix")
+        A, B, _, c = self.model.linear_matrices()
+        if np.any(c != 0):
+            raise ModelError(
+                f"solver='lp' needs f = A x + B u exactly; '{self.model.name}' has the "
+                f"constant term {c.tolist()} (use solver='ipopt', which handles it)")
+        # the LP and its Farkas proofs use A and B as exact numbers: the model's coefficients
+        # must be floats, not sums of literals that CasADi rounded (0.1 x + 0.2 x)
+        n, m = self.model.n, self.model.m
+        J = self.model.jacobian_inclusion("x")(np.zeros((1, n, 2)), np.zeros((1, m, 2)))[0]
+        Ju = self.model.jacobian_inclusion("u")(np.zeros((1, n, 2)), np.zeros((1, m, 2)))[0]
+        if not (np.array_equal(J[..., 0], J[..., 1]) and np.array_equal(Ju[..., 0], Ju[..., 1])
+                and np.array_equal(J[..., 0], A) and np.array_equal(Ju[..., 0], B)):
+            raise ModelError(
+                f"solver='lp' needs the coefficients of '{self.model.name}' to be exact "
+                "floats; some are rounded sums or products of literals (e.g. 0.1 x + 0.2 x): "
+                "write each coefficient as one number, or use solver='ipopt'")
         if self.gauge is None and self.norm == 2:
             raise ValueError("solver='lp' handles norm 1, inf or a Polytope gauge, not 2")
         if self._path != (None, None):
@@ -667,19 +791,30 @@ class ContractiveMPC:
 
     # ---------------------------------------------------------------------- solving
     def __call__(self, x: Any) -> np.ndarray:
-        """The move to apply at state ``x``: shape (m,)."""
+        """The move to apply at state ``x``: shape (m,).
+
+        In ``mode="sequence"`` the rest of the last verified sequence is applied move by
+        move as long as the state equals its prediction (to 1e-9 relative); a state off the
+        prediction (a disturbance, or a call from another state) triggers a new solve.
+        """
         t0 = time.perf_counter()
         if self.mode == "sequence" and self._queue:
-            u = self._queue.pop(0)
-            self.last_info = {"status": "ok", "certificate": "sequence", "horizon": None,
-                              "solve_time": time.perf_counter() - t0, "mode": "sequence"}
-            return u.copy()
+            xk = _state(x, self.model.n)
+            u, x_pred, plan = self._queue[0]
+            tol = 1e-9 * (1.0 + float(np.abs(x_pred).max()))
+            if float(np.abs(xk - x_pred).max()) <= tol:
+                self._queue.pop(0)
+                self.last_info = {"status": plan.status.name,
+                                  "certificate": plan.certificate.label,
+                                  "horizon": plan.horizon,
+                                  "solve_time": time.perf_counter() - t0, "mode": "sequence"}
+                return u.copy()
+            self._queue.clear()
         r = self.solve(x)
         if self.mode == "sequence" and r.mode == "mpc" and r.certificate.proved:
-            self._queue = [u.copy() for u in r.u_seq[1:]]
-        self.last_info = {"status": r.status.name, "certificate": r.certificate.label,
-                          "horizon": r.horizon, "solve_time": time.perf_counter() - t0,
-                          "mode": r.mode}
+            self._queue = [(r.u_seq[i].copy(), r.x_pred[i].copy(), r)
+                           for i in range(1, r.u_seq.shape[0])]
+        self.last_info["solve_time"] = time.perf_counter() - t0
         return r.u.copy()
 
     def reset(self) -> None:
@@ -691,23 +826,37 @@ class ContractiveMPC:
         self.last_info = None
 
     def solve(self, x: Any) -> MPCResult:
-        """Solve at state ``x`` (shape (n,)) and return the :class:`MPCResult`."""
+        """Solve at state ``x`` (shape (n,)) and return the :class:`MPCResult`.
+
+        Also sets ``last_result`` and ``last_info`` (the dict :func:`casadi_cmpc.simulate`
+        records: ``status``, ``certificate``, ``horizon``, ``solve_time``, ``mode``).
+        """
         t0 = time.perf_counter()
         xk = _state(x, self.model.n)
         e0 = self.contract @ (xk - self.x_ref)
         r0 = self._norm_value(e0)
-        if r0 == 0.0:
+        if np.array_equal(xk, self.x_ref):
             res = self._special(xk, self.u_ref.copy(), "at_reference",
                                 "the state is the reference: u_ref is applied", t0)
+        elif not r0 >= _TINY:
+            res = self._special(
+                xk, self.u_ref.copy(), "unverified",
+                f"the contracted distance ||C (x - x_ref)|| = {r0:.3g} is 0 or below "
+                f"{_TINY:g}: there is nothing to contract; u_ref is applied and nothing is "
+                "claimed", t0, mode="at_reference")
         elif self._law is not None and self._in_local_set(xk):
             u = np.asarray(self._law(xk), dtype=float).reshape(self.model.m)
             res = self._special(xk, u, "local_law",
-                                "the state lies in local_set: the local law is applied", t0)
+                                "the state is proven inside local_set: the local law is "
+                                "applied", t0)
         elif self.horizon is not None:
             res = self._solve_fixed(xk, r0, self.horizon, t0)
         else:
             res = self._search_horizon(xk, r0, t0)
         self.last_result = res
+        self.last_info = {"status": res.status.name, "certificate": res.certificate.label,
+                          "horizon": res.horizon, "solve_time": time.perf_counter() - t0,
+                          "mode": res.mode}
         return res
 
     def _norm_value(self, e: np.ndarray) -> float:
@@ -717,17 +866,19 @@ class ContractiveMPC:
         return float(np.linalg.norm(e, ord=self.norm))
 
     def _in_local_set(self, x: np.ndarray) -> bool:
+        """Membership of x in local_set, proven (a thin box certified inside)."""
         S = self.local_set
-        return bool(np.asarray(S.contains(x[None, :])).reshape(-1)[0])
+        box = np.stack([x, x], axis=-1)[None]
+        return bool(np.asarray(S.contains_box(box)).reshape(-1)[0])
 
     def _special(self, x: np.ndarray, u: np.ndarray, label: str, reason: str,
-                 t0: float) -> MPCResult:
+                 t0: float, mode: str | None = None) -> MPCResult:
         cert = Certificate(label, None, "no optimisation at this state", reason)
         xp = np.vstack([x, self.model.step(x, u, self.w_nominal if self.model.l else None)])
         return MPCResult(status=Status.UNDECIDED, message=reason, method="contractive_mpc",
                          nit=0, n_boxes=0, elapsed=time.perf_counter() - t0, x=x, u=u,
                          u_seq=u[None, :], x_pred=xp, cost=math.nan, horizon=None,
-                         certificate=cert, stats={}, mode=label)
+                         certificate=cert, stats={}, mode=mode or label)
 
     # one horizon ------------------------------------------------------------------
     def _local(self, x: np.ndarray, r0: float, N: int, start: np.ndarray | None
@@ -802,7 +953,7 @@ class ContractiveMPC:
     def _check(self, x: np.ndarray, N: int, useq: np.ndarray) -> tuple[bool, dict]:
         """Interval re-evaluation of ``useq`` from the exact ``x``: (verified, details)."""
         h = self._get_check(N)
-        z = np.concatenate([useq.ravel(), x])
+        z = h.z(useq.reshape(1, -1), x)[0]
         box = np.stack([z, z], axis=-1)[None]
         Y = h.check_inclusion.evaluate_unchecked([box], 1)[0][0]
         ok_lo = Y[:, 0] >= h.check_lo
@@ -823,20 +974,14 @@ class ContractiveMPC:
             key = ("lpcheck", N)
             h = self._horizons.get(key)
             if h is None:
-                h = self._horizons[key] = _CheckOnly(self, N)
+                h = self._horizons[key] = _Horizon(self, N, nlp=False)
             return h
         return self._get(N)
 
     def _describe_row(self, h: Any, row: int, y: np.ndarray) -> str:
-        n = self.model.n
-        if row == h.check_lo.size - 1:
-            return (f"contraction: ||C (x(N) - x_ref)|| - alpha ||C (x(k) - x_ref)|| in "
-                    f"[{y[0]:.6g}, {y[1]:.6g}], not <= 0")
-        if row < h.n_state_rows:
-            i, j = divmod(row, n)
-            return (f"state x{j + 1}({i + 1}) in [{y[0]:.6g}, {y[1]:.6g}] not inside "
-                    f"[{h.check_lo[row]:.6g}, {h.check_hi[row]:.6g}]")
-        return f"constraint row {row} in [{y[0]:.6g}, {y[1]:.6g}], not <= 0"
+        lo, hi = h.check_lo[row], h.check_hi[row]
+        want = f"<= {hi:.6g}" if not np.isfinite(lo) else f"in [{lo:.6g}, {hi:.6g}]"
+        return f"{h.labels[row]}: enclosure [{y[0]:.6g}, {y[1]:.6g}], required {want}"
 
     def _attempt(self, x: np.ndarray, r0: float, N: int, start: np.ndarray | None = None
                  ) -> tuple[np.ndarray | None, bool, dict, dict]:
@@ -930,7 +1075,8 @@ class ContractiveMPC:
                            "elapsed": time.perf_counter() - t,
                            "how": "a sampled sequence passed the interval check"}
         # 2. SIVIA over U^N x {x}
-        Z = Box(np.concatenate([Ulo, x]), np.concatenate([Uhi, x]))
+        pv = h.param_values
+        Z = Box(np.concatenate([Ulo, x, pv]), np.concatenate([Uhi, x, pv]))
         Y = Box(h.check_lo, h.check_hi)
         pav = sivia(F, Z, Y, self.search_eps, max_boxes=self.search_max_boxes,
                     time_limit=self.search_time_limit, keep_outer=False, progress=False)
@@ -979,7 +1125,7 @@ class ContractiveMPC:
                        N: int) -> np.ndarray | None:
         if cand.shape[0] == 0:
             return None
-        z = np.concatenate([cand, np.broadcast_to(x, (cand.shape[0], x.size))], axis=1)
+        z = h.z(cand, x)
         Y = F.evaluate_unchecked([np.stack([z, z], axis=-1)], z.shape[0])[0]
         ok = ((Y[:, :, 0] >= h.check_lo) & (Y[:, :, 1] <= h.check_hi)).all(axis=1)
         if not ok.any():
@@ -1006,10 +1152,10 @@ class ContractiveMPC:
         from ..solvers.minimize import minimize
 
         h = self._get_check(N)
-        m = self.model.m
-        Z = Box(np.concatenate([np.tile(self.model.U.lo, N), x]),
-                np.concatenate([np.tile(self.model.U.hi, N), x]))
-        zs = ca.SX.sym("z", N * m + self.model.n)
+        pv = h.param_values
+        Z = Box(np.concatenate([np.tile(self.model.U.lo, N), x, pv]),
+                np.concatenate([np.tile(self.model.U.hi, N), x, pv]))
+        zs = ca.SX.sym("z", h.check_fun.numel_in(0))
         gv = h.check_fun(zs)
         rows = []
         for i in range(h.check_lo.size):
@@ -1019,7 +1165,7 @@ class ContractiveMPC:
                 rows.append(h.check_lo[i] - gv[i])
         g = ca.Function("g", [zs], [ca.vertcat(*rows)])
         eps = self.optimal_eps or self.search_eps
-        r = minimize(h.cost_fun, Z, eps, constraints=g, max_boxes=self.search_max_boxes,
+        r = minimize(h.exact_cost, Z, eps, constraints=g, max_boxes=self.search_max_boxes,
                      time_limit=self.search_time_limit, progress=False)
         return {"lower": float(r.lower), "upper": float(r.upper),
                 "width": float(r.upper - r.lower), "status": r.status.name,
@@ -1121,32 +1267,3 @@ class ContractiveMPC:
             f"search {self.horizon_min}..{self.horizon_max}"
         return (f"ContractiveMPC('{self.model.name}', horizon={hz}, alpha={self.alpha}, "
                 f"norm={self._norm_name()}, solver='{self.solver}', mode='{self.mode}')")
-
-
-class _CheckOnly:
-    """Verification and search functions of horizon N without an NLP (LP controllers)."""
-
-    def __init__(self, mpc: ContractiveMPC, N: int) -> None:
-        h = _Horizon(mpc, N, nlp=False)
-        self.__dict__.update(h.__dict__)
-        if mpc.gauge is not None:
-            # the LP contracts the gauge of a polytope: replace the contraction row
-            model = mpc.model
-            z = ca.SX.sym("z", N * model.m + model.n)
-            us, x0 = z[:N * model.m], z[N * model.m:]
-            xs = h.pred_fun(us, x0)
-            P = mpc.gauge
-            xr = ca.DM(mpc.x_ref)
-            scale = ca.DM(P.b - P.A @ mpc.x_ref)  # level 1 of the gauge is the polytope
-            gN = ca.mmax(ca.mtimes(ca.DM(P.A), xs[:, N] - xr) / scale)
-            g0 = ca.fmax(0, ca.mmax(ca.mtimes(ca.DM(P.A), x0 - xr) / scale))
-            rows = h.check_fun(z)
-            self.check_fun = ca.Function(f"check_{N}", [z],
-                                         [ca.vertcat(rows[:-1], gN - mpc.alpha * g0)])
-
-    @property
-    def check_inclusion(self) -> InclusionFunction:
-        if self._check_incl is None:
-            self._check_incl = InclusionFunction(self.check_fun, "natural")
-        return self._check_incl
-

@@ -339,3 +339,115 @@ def test_certify_optimal_brackets_the_cost():
         if np.linalg.norm(x2) <= 0.99 * np.linalg.norm([1.0, -0.5]):
             best = min(best, a * a + b * b + x1 @ x1 + x2 @ x2)
     assert br["lower"] <= best + 1e-9
+
+
+# ---------------------------------------------------------------- classes found by review
+def test_certificate_is_not_built_on_folded_constants():
+    # composing 0.667 x with itself lets CasADi fold 0.667^3 in floating point; the exact
+    # graph keeps every literal as a symbol, so the check is about the model itself
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(0.667 * x[0], x[1] + 0.1 * x[2], x[2] + 0.1 * u)
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-2] * 3, [2] * 3), U=cm.Box([-1], [1]))
+    exact = Fraction(0.667) ** 19  # |x1(19)| / |x1(0)|, u has no effect on x1
+    alpha = float(exact)
+    if Fraction(alpha) >= exact:
+        alpha = float(np.nextafter(alpha, 0))
+    r = ContractiveMPC(model, horizon=19, alpha=alpha, norm=np.inf,
+                       search_max_boxes=50).solve([1.0, 0.0, 0.0])
+    assert r.certificate.label != "verified"
+    h = ContractiveMPC(model, horizon=3, alpha=0.9)._get(3)
+    consts = {h.check_fun.instruction_constant(k) for k in range(h.check_fun.n_instructions())
+              if h.check_fun.instruction_id(k) == ca.OP_CONST}
+    assert not any(abs(c - 0.667 ** 2) < 1e-12 or abs(c - 0.667 ** 3) < 1e-12 for c in consts)
+
+
+def test_disturbance_nominal_value_is_not_folded():
+    import mpmath
+
+    x, u, w = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("w")
+    model = cm.Model(x=x, u=u, w=w, f=ca.exp(w) * x + (ca.exp(w) - 1) / w * u,
+                     X=cm.Box([-10], [10]), U=cm.Box([-10], [10]),
+                     W=cm.Box([0.5e-12], [1.5e-12]))
+    r = ContractiveMPC(model, horizon=1, alpha=0.5, Q=0, R=100.0).solve([4.0])
+    if r.certificate.label == "verified":
+        mpmath.mp.dps = 60
+        wn = mpmath.mpf(model.W.mid[0])
+        x1 = mpmath.exp(wn) * 4 + (mpmath.exp(wn) - 1) / wn * mpmath.mpf(r.u[0])
+        assert abs(x1) <= mpmath.mpf(0.5) * 4
+
+
+def test_lp_refuses_what_it_cannot_represent_exactly():
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    box = {"X": cm.Box([-2, -2], [2, 2]), "U": cm.Box([-1], [1])}
+    m1 = cm.Model(x=x, u=u, f=ca.vertcat(x[0] + u, x[1]), **box)
+    with pytest.raises(ValueError, match="contract"):
+        ContractiveMPC(m1, horizon=1, alpha=0.5, norm=np.inf, solver="lp",
+                       contract=[[1, 0]])
+    m2 = cm.Model(x=x, u=u, f=ca.vertcat(x[0] + u - 5e-10, x[1] * 0.5), **box)
+    with pytest.raises(ModelError, match="constant term"):
+        ContractiveMPC(m2, horizon=1, alpha=0.9, norm=np.inf, solver="lp")
+    m3 = cm.Model(x=x, u=u, f=ca.vertcat(0.1 * x[0] + 0.2 * x[0] + u, 0.5 * x[1]), **box)
+    with pytest.raises(ModelError, match="exact"):
+        ContractiveMPC(m3, horizon=1, alpha=0.9, norm=np.inf, solver="lp")
+
+
+def test_sequence_mode_does_not_replay_a_plan_from_another_state(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=4, alpha=0.9, mode="sequence")
+    ctrl([1.0, -0.5])
+    assert ctrl.last_info["mode"] == "mpc"
+    u = ctrl([-0.8, 0.9])  # not the predicted state: a new solve
+    assert ctrl.last_info["mode"] == "mpc"
+    assert np.array_equal(u, ctrl.last_result.u)
+
+
+def test_at_reference_only_at_the_reference(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=3)
+    r = ctrl.solve([1e-170, 1e-170])  # the 2-norm underflows: nothing is claimed
+    assert r.certificate.label == "unverified" and r.certificate.proved is None
+    c2 = ContractiveMPC(cannon, horizon=3, contract=[[1.0, 1.0]])
+    r2 = c2.solve([1.0, -1.0])  # C e = 0 but x is not the reference
+    assert r2.certificate.label != "at_reference"
+
+
+def test_last_info_follows_solve(cannon):
+    ctrl = ContractiveMPC(cannon, horizon=3, alpha=0.9)
+    ctrl([0.5, 0.2])
+    r = ctrl.solve([0.0, 0.0])
+    assert ctrl.last_info["certificate"] == r.certificate.label == "at_reference"
+
+
+def test_local_set_membership_is_proven(cannon):
+    T = cm.Polytope([[1.0, 1.0], [-1.0, 0.0], [0.0, -1.0]], [1.0, 0.0, 0.0])
+    ctrl = ContractiveMPC(cannon, horizon=3, local_law=np.zeros((1, 2)), local_set=T)
+    r = ctrl.solve([1.0, 2.0 ** -60])  # outside T exactly, inside in floating point
+    assert r.mode != "local_law"
+
+
+@pytest.mark.parametrize("kw", [{"alpha": "0.5"}, {"horizon": "3"}])
+def test_strings_are_refused(cannon, kw):
+    args = {"horizon": 3, "alpha": 0.9}
+    args.update(kw)
+    with pytest.raises(ValueError, match="string"):
+        ContractiveMPC(cannon, **args)
+
+
+def test_none_state_is_a_type_error(cannon):
+    with pytest.raises(TypeError):
+        ContractiveMPC(cannon, horizon=3).solve(None)
+
+
+def test_fixed_input_component_and_small_magnitudes():
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u", 2)
+    s = 1e-6
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * x[2], x[2] + 0.1 * u[0] + u[1])
+    model = cm.Model(x=x, u=u, f=f, X=cm.Box([-s] * 3, [s] * 3),
+                     U=cm.Box([-10 * s, 0.0], [10 * s, 0.0]))
+    ctrl = ContractiveMPC(model, horizon=6, alpha=0.95, norm=np.inf)
+    r = ctrl.solve(np.array([0.2, 0.6, 0.9]) * s)
+    assert r.nit >= 0
+    assert r.certificate.label in ("verified", "undecided", "unverified")
+    if r.certificate.label == "verified":
+        _check_sequence(model, np.array([0.2, 0.6, 0.9]) * s, r.u_seq, 0.95, np.inf)
