@@ -16,7 +16,7 @@ from .exceptions import (
     UnboundedSetError,
 )
 from .interval._derivative import JacobianInclusion
-from .interval.compiler import InclusionFunction
+from .interval.compiler import InclusionFunction, inclusion
 from .sets.box import Box
 
 __all__ = ["Model"]
@@ -271,13 +271,17 @@ class Model:
         return as_points(v, d, name)[0]
 
     # -------------------------------------------------------------- inclusion
-    def inclusion(self, kind: str = "natural") -> Callable[..., np.ndarray]:
+    def inclusion(self, kind: str = "natural", *, backend: str = "auto"
+                  ) -> Callable[..., np.ndarray]:
         """Batched interval inclusion function of one step.
 
         Parameters
         ----------
         kind : {"natural", "centered"}
             See :func:`casadi_cmpc.interval.inclusion`.
+        backend : {"auto", "numpy", "scalar"}
+            Evaluator of the boxes (Python float code for small batches, numpy for large
+            ones with "auto"); see :func:`casadi_cmpc.interval.inclusion`.
 
         Returns
         -------
@@ -287,8 +291,9 @@ class Model:
             1 broadcast. Every successor ``f(x, u, w)`` with x, u, w in the boxes lies inside.
         """
         kind = str(kind).lower()
-        F = self._cached(("inclusion", kind),
-                         lambda: InclusionFunction(self.function, kind))
+        backend = str(backend).lower()
+        F = self._cached(("inclusion", kind, backend),
+                         lambda: inclusion(self.function, kind, backend=backend))
         return _ModelInclusion(self, F)
 
     def jacobian_inclusion(self, wrt: str = "x",
@@ -615,10 +620,20 @@ class _ModelInclusion:
         self.model = model
         self.F = F
         self.kind = F.kind
+        self._defaults: tuple[Any, Any, np.ndarray, np.ndarray] | None = None
 
     def __call__(self, X: Any, U: Any = None, W: Any = None) -> np.ndarray:
-        boxes, _ = _model_boxes(self.model, X, U, W)
-        return self.F(*boxes)[0]
+        m = self.model
+        if W is None or m.w is not None:
+            # small batches of float arrays: the evaluator's own cheap checks
+            d = self._defaults
+            if d is None or d[0] is not m.U or d[1] is not m.W:
+                d = self._defaults = (m.U, m.W, m.U.as_array(), m.W_box.as_array())
+            out = self.F._call_small((X, d[2] if U is None else U, d[3] if W is None else W))
+            if out is not None:
+                return out[0]
+        boxes, n_b = _model_boxes(m, X, U, W)
+        return self.F.evaluate_unchecked(boxes, n_b)[0]
 
     def __repr__(self) -> str:
         return f"<{self.kind} inclusion of model '{self.model.name}'>"

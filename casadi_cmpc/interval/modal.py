@@ -93,7 +93,7 @@ import numpy as np
 from .._validate import as_boxes
 from ..exceptions import DimensionError, InvalidBoundsError, UnsupportedOperationError
 from . import arith
-from .compiler import InclusionFunction, _as_sx_function, _discontinuous_ops
+from .compiler import InclusionFunction, _as_sx_function, _discontinuous_ops, inclusion
 
 __all__ = [
     "PROPER", "IMPROPER", "POINT",
@@ -900,7 +900,7 @@ class SemanticExtension:
                 "a continuous function")
         self.fun = fun
         self.mean_value = bool(mean_value)
-        self.F = InclusionFunction(fun, "natural")
+        self.F = inclusion(fun, "natural")
         self.size_in = list(self.F.size_in)
         self.d = int(sum(self.size_in))
         self.p = int(self.F.size_out[0])

@@ -6,6 +6,9 @@ inside each box (endpoints included) the exact real value, computed with mpmath 
 from the exactly converted float point, must lie inside the returned bounds (compared
 exactly). Where the real function is undefined at a point of the box, the result must carry
 no information (the whole line, or NaN), as the documented domain convention says.
+
+The tests that take the fixture ``A`` run twice: on the numpy operations of ``arith`` and on
+the scalar (Python float) operations of the small-batch backend, element by element.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import mp_reference as R
 import mpmath
 import numpy as np
 import pytest
+from backends import ARITH, BACKENDS
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -34,6 +38,13 @@ SETTINGS = settings(max_examples=40, deadline=None,
 HALF_PI_MULTS = [float(k * mpmath.pi / 2)
                  for k in [*range(-8, 9), 1_000_001, -2_000_003, 12_345_678, 63_661_977]]
 UNIT = [-1.0, 0.0, 1.0]
+
+
+@pytest.fixture(scope="module", params=BACKENDS, name="A")
+def _backend_ops(request):
+    """The interval operations of one backend (``arith`` or the scalar ones); the tests that
+    take it shadow the module name ``A`` (``arith``)."""
+    return ARITH[request.param]
 
 
 # ------------------------------------------------------------------------ strategies
@@ -197,7 +208,7 @@ UNARY = {
 @pytest.mark.parametrize("name", sorted(UNARY))
 @SETTINGS
 @given(data=st.data())
-def test_unary_sound(name, data):
+def test_unary_sound(name, data, A):
     ref, specials = UNARY[name]
     bs = data.draw(boxes(specials), label="boxes")
     rng = data.draw(seeds(), label="rng")
@@ -235,7 +246,7 @@ BINARY = {
 @pytest.mark.parametrize("name", sorted(BINARY))
 @SETTINGS
 @given(data=st.data())
-def test_binary_sound(name, data):
+def test_binary_sound(name, data, A):
     ref, spec_a, spec_b = BINARY[name]
     ba = data.draw(boxes(spec_a, max_size=4), label="a")
     if data.draw(st.booleans(), label="same"):
@@ -264,7 +275,7 @@ CONSTS = st.one_of(anchors([0.0, 1.0, -1.0, 0.5, 3.0]), st.sampled_from([0.0, -0
 @pytest.mark.parametrize("name", ["addc", "mulc", "divc", "csub", "cdiv"])
 @SETTINGS
 @given(data=st.data())
-def test_constant_ops_sound(name, data):
+def test_constant_ops_sound(name, data, A):
     bs = data.draw(boxes([0.0, 1.0, -1.0]), label="boxes")
     c = data.draw(CONSTS, label="c")
     rng = data.draw(seeds(), label="rng")
@@ -285,7 +296,7 @@ def test_constant_ops_sound(name, data):
 
 @SETTINGS
 @given(bs=boxes([0.0, 1.0, -1.0]), n=st.integers(-7, 9), rng=seeds())
-def test_powi_sound(bs, n, rng):
+def test_powi_sound(bs, n, rng, A):
     al, ah = _arrays(bs)
     lo, hi = _bcast(*A.powi(al, ah, n), al.shape)
     for i, (a, b) in enumerate(bs):
@@ -301,7 +312,7 @@ POWC_EXPONENTS = st.one_of(
 
 @SETTINGS
 @given(bs=boxes([0.0, 1.0, -1.0]), c=POWC_EXPONENTS, rng=seeds())
-def test_powc_sound(bs, c, rng):
+def test_powc_sound(bs, c, rng, A):
     al, ah = _arrays(bs)
     lo, hi = _bcast(*A.powc(al, ah, c), al.shape)
     for i, (a, b) in enumerate(bs):
@@ -372,7 +383,7 @@ CONVENTION = [
 
 @pytest.mark.parametrize(("name", "args", "expected"), CONVENTION,
                          ids=[f"{c[0]}{c[1]}" for c in CONVENTION])
-def test_domain_convention(name, args, expected):
+def test_domain_convention(name, args, expected, A):
     if name == "cdiv":  # the constant comes first
         arrays = [args[0], np.array([args[1]]), np.array([args[2]])]
     elif name in ("divc", "powc", "powi"):  # the constant (or exponent) comes last
@@ -384,7 +395,7 @@ def test_domain_convention(name, args, expected):
     np.testing.assert_array_equal(got, expected)
 
 
-def test_domain_inside_is_informative():
+def test_domain_inside_is_informative(A):
     """Boxes inside the (closed) domain are not sent to the whole line."""
     one = np.array([1.0])
     for name, (a, b) in [("sqrt", (0.0, 4.0)), ("log", (1e-300, 1.0)), ("asin", (-1.0, 1.0)),
@@ -407,7 +418,7 @@ SAMPLE = [-1e10, -3.0, -1.0, -0.5, 0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 7.0, 1e10]
 
 
 @pytest.mark.parametrize("name", ALL_UNARY)
-def test_nan_input_unary_is_no_information(name):
+def test_nan_input_unary_is_no_information(name, A):
     """A NaN box stands for any real: the result must contain the value at every point."""
     ref = UNARY[name][0]
     lo, hi = getattr(A, name)(np.array([NAN]), np.array([NAN]))
@@ -420,7 +431,7 @@ def test_nan_input_unary_is_no_information(name):
 
 
 @pytest.mark.parametrize("name", ALL_BINARY)
-def test_nan_input_binary_is_no_information(name):
+def test_nan_input_binary_is_no_information(name, A):
     ref = BINARY[name][0]
     nan = np.array([NAN])
     for other in [(-1.0, 2.0), (0.0, 0.0), (2.0, 3.0)]:
@@ -447,7 +458,7 @@ nonneg_boxes = st.tuples(
 
 @settings(max_examples=200, deadline=None)
 @given(a=nonneg_boxes, b=nonneg_boxes)
-def test_sum_of_nonnegative_is_nonnegative(a, b):
+def test_sum_of_nonnegative_is_nonnegative(a, b, A):
     lo, _ = A.add(np.array([a[0]]), np.array([a[1]]), np.array([b[0]]), np.array([b[1]]))
     assert lo[0] >= 0.0
     lo, _ = A.addc(np.array([a[0]]), np.array([a[1]]), b[0])
@@ -458,7 +469,7 @@ def test_sum_of_nonnegative_is_nonnegative(a, b):
 
 @settings(max_examples=200, deadline=None)
 @given(bs=boxes([0.0]))
-def test_sign_definite_results(bs):
+def test_sign_definite_results(bs, A):
     al, ah = _arrays(bs)
     # (a NaN bound, "possibly undefined", is not a negative bound; an overflowed square
     # has the finite lower bound MAX_FLOAT, not NaN)
@@ -495,7 +506,7 @@ THIN_UNARY = {
 
 @pytest.mark.parametrize("name", sorted(THIN_UNARY))
 @pytest.mark.parametrize("scale", [1.0, 1e-7, 7e5])
-def test_thin_box_gives_thin_result(name, scale):
+def test_thin_box_gives_thin_result(name, scale, A):
     x = THIN_UNARY[name]
     if name in ("neg", "twice", "sq", "inv", "sqrt", "log", "atan", "asinh", "fabs", "sign",
                 "not_"):
@@ -520,7 +531,7 @@ THIN_BINARY = {
 
 
 @pytest.mark.parametrize("name", sorted(THIN_BINARY))
-def test_thin_binary_gives_thin_result(name):
+def test_thin_binary_gives_thin_result(name, A):
     x, y = THIN_BINARY[name]
     lo, hi = getattr(A, name)(*(np.array([v]) for v in (x, x, y, y)))
     v = float(BINARY[name][0](R.F(x), R.F(y)))
@@ -529,7 +540,7 @@ def test_thin_binary_gives_thin_result(name):
     assert lo[0] <= v <= hi[0]
 
 
-def test_constant_ops_thin():
+def test_constant_ops_thin(A):
     x = np.array([1.3])
     for lo, hi, v in [(*A.addc(x, x, 0.1), 1.4), (*A.csub(0.1, x, x), -1.2),
                       (*A.mulc(x, x, -3.0), -3.9), (*A.divc(x, x, 4.0), 0.325),
@@ -538,7 +549,7 @@ def test_constant_ops_thin():
         assert lo[0] <= v <= hi[0] and _rel_width(lo[0], hi[0], v) < 1e-10
 
 
-def test_ranges_are_tight_on_wide_boxes():
+def test_ranges_are_tight_on_wide_boxes(A):
     """Extremum handling: the bounds are the true extrema up to rounding, not the range."""
     def close(got, want):
         return abs(float(got) - want) <= 1e-12 * max(1.0, abs(want))
@@ -562,7 +573,7 @@ def test_ranges_are_tight_on_wide_boxes():
     assert lo[0] >= -1.5 - 1e-15 and hi[0] <= 1.5 + 1e-15
 
 
-def test_logic_results_are_exact():
+def test_logic_results_are_exact(A):
     def b(lo, hi):
         return np.array([float(lo)]), np.array([float(hi)])
 
@@ -617,7 +628,7 @@ def test_batched_unary_matches_elementwise(name):
 
 
 @pytest.mark.parametrize("name", ALL_BINARY)
-def test_batched_binary_matches_elementwise_and_broadcasts(name):
+def test_batched_binary_matches_elementwise_and_broadcasts(name, A):
     fn = getattr(A, name)
     rng = np.random.default_rng(2)
     al, ah = _batch_boxes(rng, 16)
@@ -673,7 +684,7 @@ def test_ops_wrappers_shapes_and_values():
 
 
 # ------------------------------------------------------------------------ regressions
-def test_remainder_can_be_negative_for_positive_x():
+def test_remainder_can_be_negative_for_positive_x(A):
     """remainder(2, 3) = -1: the result is not confined to the sign of x."""
     lo, hi = A.remainder(*(np.array([v]) for v in (2.0, 2.0, 3.0, 3.0)))
     assert lo[0] <= -1.0 <= hi[0]
@@ -683,7 +694,7 @@ def test_remainder_can_be_negative_for_positive_x():
     assert lo[0] <= 0.0 <= hi[0]
 
 
-def test_remainder_subnormal_halving():
+def test_remainder_subnormal_halving(A):
     """|x| <= |y|/2 must not be decided with a rounded y/2 (3 * 2**-1074 / 2 rounds up)."""
     t = 2.0**-1074
     x, y = 2 * t, 3 * t  # remainder(x, y) = -t, not x
@@ -693,7 +704,7 @@ def test_remainder_subnormal_halving():
     assert lo[0] <= -2.5 * t and hi[0] >= 2.5 * t  # reals in the box reach |y|/2
 
 
-def test_pow_negative_base_non_thin_exponent():
+def test_pow_negative_base_non_thin_exponent(A):
     """x**y with x partly negative and a non-integer exponent in y is undefined somewhere:
     no information (NaN), never a bounded interval that misses x**1 = -1e6."""
     for args in ((-1e6, 1.0, -1e6, 1.0), (-2.0, 3.0, 1.0, 3.0)):

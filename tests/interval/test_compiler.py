@@ -7,6 +7,9 @@ the compiled graph itself (CasADi folds and simplifies while building, e.g.
 ``sqrt(x) * sqrt(x) -> x``) is checked too, by evaluating its instruction list in mpmath.
 Where the tree is undefined at a point, the innermost undefined sub-expression (an operation
 whose operands are defined) must have the whole line as enclosure, per the domain convention.
+
+The tests that take the fixture ``backend`` run with the numpy evaluator and with the scalar
+(Python float) one, forced (the scalar one may not fall back to numpy).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import mp_reference as R
 import mpmath
 import numpy as np
 import pytest
+from backends import BACKENDS, compiled
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -27,6 +31,12 @@ from casadi_cmpc.exceptions import DimensionError, UnsupportedOperationError
 
 SETTINGS = settings(max_examples=100, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def backend(request):
+    """The evaluator of the compiled inclusion functions."""
+    return request.param
 
 # constants whose products are exact: CasADi folds c1 * (c2 * e) into (c1 * c2) * e
 CONSTS = [0.5, 2.0, 3.0, -2.5, 0.25, 7.0, -3.0, 1.5, -0.75]
@@ -190,7 +200,7 @@ def _function(tree):
     return ca.Function("f", [x, p], [e], ["x", "p"], ["y"]), (x, p), memo
 
 
-def _check_tree(tree, X, P, rng, kinds, continuous=False):
+def _check_tree(tree, X, P, rng, kinds, continuous=False, backend="numpy"):
     fun, (x, p), sx_memo = _function(tree)
     # CasADi turns e.g. x - x into 0 and then folds cos(0), atan(1), ... into rounded doubles:
     # the compiled graph then differs from the tree by that rounding, and only the exact
@@ -200,7 +210,7 @@ def _check_tree(tree, X, P, rng, kinds, continuous=False):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", cm.CmpcWarning)
         for kind in kinds:
-            F = cm.interval.inclusion(fun, kind)
+            F = compiled(fun, kind, backend)
             if kind == "centered" and continuous:
                 assert not getattr(F, "centered_fallback", False), "not a continuous tree"
             out = F(X, P)
@@ -224,7 +234,7 @@ def _check_tree(tree, X, P, rng, kinds, continuous=False):
                 if not isinstance(t, UndefinedAt) and not folded:
                     _check_tree_value(tree, vals, t, lo, hi, ctx)
             if isinstance(t, UndefinedAt):
-                _check_undefined_node(t.node, sx_memo, (x, p), X, P, i, pt, sub_cache)
+                _check_undefined_node(t.node, sx_memo, (x, p), X, P, i, pt, sub_cache, backend)
 
 
 def _tree_value_inside(t, lo, hi, rel_exp):
@@ -245,12 +255,12 @@ def _check_tree_value(tree, vals, t, lo, hi, ctx):
         assert _tree_value_inside(t2, lo, hi, -900), f"{ctx}: tree value {mpmath.nstr(t2, 20)}"
 
 
-def _check_undefined_node(node, sx_memo, syms, X, P, i, pt, cache):
+def _check_undefined_node(node, sx_memo, syms, X, P, i, pt, cache, backend="numpy"):
     """The innermost undefined operation must be enclosed by the whole line."""
     key = id(node)
     if key not in cache:
         sub = ca.Function("g", list(syms), [sx_memo[key][1]])
-        cache[key] = (sub, cm.interval.inclusion(sub, "natural"))
+        cache[key] = (sub, compiled(sub, "natural", backend))
     sub, G = cache[key]
     if graph_value(sub, pt) is not R.UNDEF:
         return  # CasADi simplified the undefined operation away (e.g. e / e -> 1)
@@ -261,31 +271,31 @@ def _check_undefined_node(node, sx_memo, syms, X, P, i, pt, cache):
 
 @SETTINGS
 @given(tree=expressions(continuous=False), batch=batches())
-def test_natural_random_expressions(tree, batch):
+def test_natural_random_expressions(tree, batch, backend):
     X, P, rng = batch
-    _check_tree(tree, X, P, rng, ["natural"])
+    _check_tree(tree, X, P, rng, ["natural"], backend=backend)
 
 
 @SETTINGS
 @given(tree=expressions(continuous=True), batch=batches())
-def test_natural_and_centered_random_continuous_expressions(tree, batch):
+def test_natural_and_centered_random_continuous_expressions(tree, batch, backend):
     X, P, rng = batch
-    _check_tree(tree, X, P, rng, ["natural", "centered"], continuous=True)
+    _check_tree(tree, X, P, rng, ["natural", "centered"], continuous=True, backend=backend)
 
 
 @settings(max_examples=40, deadline=None)
 @given(tree=expressions(continuous=False), batch=batches())
-def test_centered_falls_back_soundly_on_jumps(tree, batch):
+def test_centered_falls_back_soundly_on_jumps(tree, batch, backend):
     """Trees with if_else or atan2 (which may jump) are still enclosed by "centered"."""
     X, P, rng = batch
-    _check_tree(tree, X, P, rng, ["centered"])
+    _check_tree(tree, X, P, rng, ["centered"], backend=backend)
 
 
 # --------------------------------------------------------------- targeted behaviour
-def _single(fun, kind, *boxes):
+def _single(fun, kind, *boxes, backend="numpy"):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", cm.CmpcWarning)
-        F = cm.interval.inclusion(fun, kind)
+        F = compiled(fun, kind, backend)
     return F(*[np.array([[list(b)]], dtype=float) for b in boxes])[0][0, 0]
 
 
@@ -317,12 +327,12 @@ def test_unknown_kind_and_wrong_shapes_raise():
 
 
 @pytest.mark.parametrize("kind", ["natural", "centered"])
-def test_mx_function_is_expanded(kind):
+def test_mx_function_is_expanded(kind, backend):
     x = ca.MX.sym("x", 2)
     p = ca.MX.sym("p")
     e = ca.vertcat(ca.sin(x[0]) * p + x[1] ** 2, ca.exp(x[0] - x[1]) / (2 + p))
     fun = ca.Function("f", [x, p], [e])
-    F = cm.interval.inclusion(fun, kind)
+    F = compiled(fun, kind, backend)
     assert F.fun.is_a("SXFunction")
     rng = np.random.default_rng(5)
     c = rng.uniform(-1, 1, (6, 2))
@@ -341,7 +351,7 @@ def test_mx_function_is_expanded(kind):
 
 
 @pytest.mark.parametrize("kind", ["natural", "centered"])
-def test_outputs_never_contain_nan(kind):
+def test_outputs_never_contain_nan(kind, backend):
     x = ca.SX.sym("x")
     y = ca.SX.sym("y")
     exprs = [ca.log(x), ca.sqrt(x) * y, x * ca.log(y), ca.exp(ca.exp(x)) - ca.exp(ca.exp(y)),
@@ -349,7 +359,7 @@ def test_outputs_never_contain_nan(kind):
     fun = ca.Function("f", [x, y], exprs)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", cm.CmpcWarning)
-        F = cm.interval.inclusion(fun, kind)
+        F = compiled(fun, kind, backend)
     boxes = np.array([[-2.0, -1.0], [-1.0, 1.0], [0.0, 0.0], [0.0, 2.0], [800.0, 900.0],
                       [-np.inf, 0.0], [3.0, np.inf], [1e300, 1.7e308]])
     X = boxes[:, None, :]
@@ -362,11 +372,11 @@ def test_outputs_never_contain_nan(kind):
 
 
 @pytest.mark.parametrize("kind", ["natural", "centered"])
-def test_single_box_broadcasts_against_batch(kind):
+def test_single_box_broadcasts_against_batch(kind, backend):
     x = ca.SX.sym("x", 2)
     p = ca.SX.sym("p", 2)
     e = ca.vertcat(x[0] * p[0] + ca.sin(x[1] * p[1]), ca.exp(p[0]) - x[0] ** 2)
-    F = cm.interval.inclusion(ca.Function("f", [x, p], [e]), kind)
+    F = compiled(ca.Function("f", [x, p], [e]), kind, backend)
     rng = np.random.default_rng(7)
     c = rng.uniform(-1, 1, (9, 2))
     X = np.stack([c, c + rng.uniform(0, 0.2, (9, 2))], axis=-1)
@@ -386,12 +396,12 @@ def test_single_box_broadcasts_against_batch(kind):
 
 
 @pytest.mark.parametrize("kind", ["natural", "centered"])
-def test_constant_outputs(kind):
+def test_constant_outputs(kind, backend):
     x = ca.SX.sym("x", 2)
     one = ca.SX(1.0)
     outs = [ca.SX(2.5), ca.vertcat(x[0] + 1, ca.SX(-7.0)), ca.sin(one), ca.SX(ca.inf) + 0 * one,
             ca.SX(math.nan) + 0 * one]
-    F = cm.interval.inclusion(ca.Function("f", [x], outs), kind)
+    F = compiled(ca.Function("f", [x], outs), kind, backend)
     X = np.array([[[0.0, 1.0], [2.0, 3.0]]] * 3)
     r = F(X)
     assert [o.shape for o in r] == [(3, 1, 2), (3, 2, 2), (3, 1, 2), (3, 1, 2), (3, 1, 2)]
@@ -405,12 +415,12 @@ def test_constant_outputs(kind):
 
 
 @pytest.mark.parametrize("kind", ["natural", "centered"])
-def test_structural_zeros_are_exact_zeros(kind):
+def test_structural_zeros_are_exact_zeros(kind, backend):
     x = ca.SX.sym("x", 3)
     f = ca.vertcat(x[0] * x[1], ca.sin(x[0]), ca.exp(x[2]), x[1] ** 2)
     J = ca.jacobian(f, x)  # 4x3 with structural zeros
     assert J.nnz() < 12
-    F = cm.interval.inclusion(ca.Function("J", [x], [J]), kind)
+    F = compiled(ca.Function("J", [x], [J]), kind, backend)
     rng = np.random.default_rng(11)
     c = rng.uniform(-2, 2, (5, 3))
     X = np.stack([c, c + rng.uniform(0, 0.5, (5, 3))], axis=-1)
@@ -428,14 +438,14 @@ def test_structural_zeros_are_exact_zeros(kind):
             assert R.inside(out[i, k, 0], out[i, k, 1], vals[k])
 
 
-def test_centered_is_tighter_than_natural_on_small_boxes():
+def test_centered_is_tighter_than_natural_on_small_boxes(backend):
     x = ca.SX.sym("x", 2)
     e = x[0] * ca.exp(x[1]) - x[0] ** 2 * x[1] + ca.sin(x[0] * x[1])
     fun = ca.Function("f", [x], [e])
     c = np.array([0.7, -0.4])
     X = np.array([[[c[0] - 0.01, c[0] + 0.01], [c[1] - 0.01, c[1] + 0.01]]])
-    nat = cm.interval.inclusion(fun, "natural")(X)[0][0, 0]
-    cen = cm.interval.inclusion(fun, "centered")(X)[0][0, 0]
+    nat = compiled(fun, "natural", backend)(X)[0][0, 0]
+    cen = compiled(fun, "centered", backend)(X)[0][0, 0]
     assert nat[0] <= cen[0] <= cen[1] <= nat[1]
     assert cen[1] - cen[0] < 0.8 * (nat[1] - nat[0])
 
@@ -445,24 +455,24 @@ def test_centered_is_tighter_than_natural_on_small_boxes():
     ("floor(x)", (0.0, 2.0), 2.0),
     ("sign(x)", (-1.0, 1.0), 1.0),
 ])
-def test_centered_contains_jumps(expr, box, point):
+def test_centered_contains_jumps(expr, box, point, backend):
     x = ca.SX.sym("x")
     e = {"if_else(x > 0, x + 1, x - 1)": ca.if_else(x > 0, x + 1, x - 1),
          "floor(x)": ca.floor(x), "sign(x)": ca.sign(x)}[expr]
     fun = ca.Function("f", [x], [e])
-    lo, hi = _single(fun, "centered", box)
+    lo, hi = _single(fun, "centered", box, backend=backend)
     v = float(fun(point))
-    lo2, hi2 = _single(fun, "centered", (box[0], box[0]))
+    lo2, hi2 = _single(fun, "centered", (box[0], box[0]), backend=backend)
     assert lo <= v <= hi and lo <= float(fun(box[0])) <= hi and lo2 <= hi2
 
 
 # ------------------------------------------------------ centered-form regressions
-def test_centered_atan2_across_the_branch_cut():
+def test_centered_atan2_across_the_branch_cut(backend):
     """atan2 jumps by 2*pi across the negative x axis: no mean-value form through it."""
     y = ca.SX.sym("y")
     x = ca.SX.sym("x")
     fun = ca.Function("f", [y, x], [ca.atan2(y, x)])
-    lo, hi = _single(fun, "centered", (-0.1, 0.1), (-2.0, -1.0))
+    lo, hi = _single(fun, "centered", (-0.1, 0.1), (-2.0, -1.0), backend=backend)
     for v in (math.atan2(-0.05, -1.5), math.atan2(0.05, -1.5)):  # about -3.108 and 3.108
         assert lo <= v <= hi
 

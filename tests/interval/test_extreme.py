@@ -15,6 +15,11 @@ endpoints at subnormals, at 0 or -0.0, and at the special points of the operatio
 Composites of two or three operations compiled from CasADi graphs are checked the same way
 through :func:`casadi_cmpc.interval.inclusion` (whose outputs carry no NaN: "possibly
 undefined" is the whole line there).
+
+Both evaluators are checked: the operations that take the fixture ``A`` run on the numpy
+operations of ``arith`` and on the scalar (Python float) operations of the small-batch
+backend; the compiled composites take the fixture ``backend`` and are evaluated by the numpy
+evaluator and by the scalar one (which then may not fall back to numpy).
 """
 
 from __future__ import annotations
@@ -26,10 +31,10 @@ import mp_reference as R
 import mpmath
 import numpy as np
 import pytest
+from backends import ARITH, BACKENDS, compiled
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import casadi_cmpc as cm
 from casadi_cmpc.interval import arith as A
 from casadi_cmpc.interval import ops
 
@@ -38,6 +43,24 @@ pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 INF = math.inf
 NAN = math.nan
 MAX = float(np.finfo(float).max)
+
+
+@pytest.fixture(scope="module", params=BACKENDS, name="A")
+def _backend_ops(request):
+    """The interval operations of one backend; the tests that take it shadow the module name
+    ``A`` (``arith``)."""
+    return ARITH[request.param]
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def backend(request):
+    """The evaluator of the compiled inclusion functions."""
+    return request.param
+
+
+def _needs(ops_ns, name):
+    if not hasattr(ops_ns, name):
+        pytest.skip(f"{name} is a helper of the numpy compiler only")
 SUB = 5e-324
 SETTINGS = settings(max_examples=30, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -238,7 +261,7 @@ def _bc(lo, hi, n):
 @pytest.mark.parametrize("name", sorted(UNARY_REF))
 @SETTINGS
 @given(data=st.data())
-def test_unary_extreme(name, data):
+def test_unary_extreme(name, data, A):
     specials = UNARY_SPECIAL.get(name, [])
     bs = data.draw(st.lists(xbox(specials), min_size=1, max_size=4), label="boxes")
     rng = data.draw(seeds(), label="rng")
@@ -264,7 +287,7 @@ BINARY_SPECIAL = {
 @pytest.mark.parametrize("name", sorted(BINARY_REF))
 @SETTINGS
 @given(data=st.data())
-def test_binary_extreme(name, data):
+def test_binary_extreme(name, data, A):
     sa, sb = BINARY_SPECIAL.get(name, ([0.0, 1.0], [0.0, 1.0]))
     n = data.draw(st.integers(1, 3), label="n")
     ba = data.draw(st.lists(xbox(sa), min_size=n, max_size=n), label="a")
@@ -291,7 +314,7 @@ CONST = st.one_of(st.sampled_from(EXTREMES + [0.5, 2.0, 3.0, -2.5]), _value([]))
                                   "powi"])
 @SETTINGS
 @given(data=st.data())
-def test_constant_ops_extreme(name, data):
+def test_constant_ops_extreme(name, data, A):
     bs = data.draw(st.lists(xbox([0.0, 1.0, -1.0]), min_size=1, max_size=4), label="boxes")
     rng = data.draw(seeds(), label="rng")
     al, ah = _arr(bs)
@@ -348,7 +371,7 @@ CASE_BASED_BINARY = ["fmin", "fmax", "copysign", "fmod", "remainder", "atan2", "
 
 
 @pytest.mark.parametrize("name", sorted(UNARY_REF))
-def test_nan_operand_unary(name):
+def test_nan_operand_unary(name, A):
     lo, hi = getattr(A, name)(np.array([NAN, 1.0]), np.array([NAN, 2.0]))
     assert math.isnan(lo[0]) and math.isnan(hi[0]), (name, lo, hi)
     check_invariant(lo, hi, name)
@@ -356,7 +379,7 @@ def test_nan_operand_unary(name):
 
 @pytest.mark.parametrize("name", sorted(BINARY_REF))
 @pytest.mark.parametrize("other", [(-1.0, 2.0), (0.0, 0.0), (-INF, INF), (2.0, INF)])
-def test_nan_operand_binary(name, other):
+def test_nan_operand_binary(name, other, A):
     fn = getattr(A, name)
     n, o = (np.array([NAN]), np.array([NAN])), (np.array([other[0]]), np.array([other[1]]))
     for args in ((*n, *o), (*o, *n)):
@@ -367,7 +390,7 @@ def test_nan_operand_binary(name, other):
 @pytest.mark.parametrize("name", CASE_BASED_UNARY)
 @pytest.mark.parametrize("other", [(-1.0, 2.0), (0.0, 0.0), (1.0, 2.0), (-INF, INF),
                                    (710.0, 711.0), (-1e300, 1e300)])
-def test_nan_in_one_bound_unary(name, other):
+def test_nan_in_one_bound_unary(name, other, A):
     fn = getattr(A, name)
     for args in ((NAN, other[1]), (other[0], NAN), (NAN, NAN)):
         lo, hi = fn(np.array([args[0]]), np.array([args[1]]))
@@ -378,7 +401,8 @@ def test_nan_in_one_bound_unary(name, other):
 @pytest.mark.parametrize("name", CASE_BASED_BINARY)
 @pytest.mark.parametrize("other", [(-1.0, 2.0), (0.0, 0.0), (1.0, 2.0), (-INF, INF),
                                    (2.0, 2.0)])
-def test_nan_in_one_bound_binary(name, other):
+def test_nan_in_one_bound_binary(name, other, A):
+    _needs(A, name)
     fn = getattr(A, name)
     o = [np.array([v]) for v in other]
     for nan_pair in ((NAN, other[1]), (other[0], NAN), (NAN, NAN)):
@@ -409,7 +433,7 @@ def _one(fn, *vals):
     ("add", (MAX, MAX, MAX, MAX)), ("hypot", (1e308, MAX, 1e308, MAX)),
     ("powi3", (1e200, 1e201)), ("powc", (1e200, 1e201)), ("pow", (1e200, 1e201, 2.5, 3.5)),
 ])
-def test_overflow_keeps_a_finite_lower_bound(name, args):
+def test_overflow_keeps_a_finite_lower_bound(name, args, A):
     """An overflowed value is a finite real above the largest float: its lower bound is
     below the exact value (at most MAX), never +inf or NaN."""
     if name == "powi3":
@@ -426,7 +450,7 @@ def test_overflow_keeps_a_finite_lower_bound(name, args):
     ("sinh", (-712.0, -711.0)), ("mul", (-1e201, -1e200, 1e200, 1e201)),
     ("sub", (-MAX, -MAX, MAX, MAX)), ("powi3", (-1e201, -1e200)),
 ])
-def test_negative_overflow_keeps_a_finite_upper_bound(name, args):
+def test_negative_overflow_keeps_a_finite_upper_bound(name, args, A):
     if name == "powi3":
         lo, hi = _one(lambda a, b: A.powi(a, b, 3), *args)
     else:
@@ -434,7 +458,7 @@ def test_negative_overflow_keeps_a_finite_upper_bound(name, args):
     assert lo == -INF and not math.isnan(hi) and -MAX <= hi < -1e300, (name, lo, hi)
 
 
-def test_sin_cos_of_unbounded_box_is_the_range():
+def test_sin_cos_of_unbounded_box_is_the_range(A):
     for fn in (A.sin, A.cos):
         assert _one(fn, -INF, 0.0) == (-1.0, 1.0)
         assert _one(fn, 1e300, INF) == (-1.0, 1.0)
@@ -517,8 +541,8 @@ SAFE_OPS = {
 }
 
 
-def _check_compiled(f, boxes, rng, ctx, n_pts=5):
-    F = cm.interval.inclusion(f)
+def _check_compiled(f, boxes, rng, ctx, n_pts=5, backend="numpy"):
+    F = compiled(f, backend=backend)
     X = np.array([[b0, b1] for b0, b1 in boxes])
     out = F(X)[0][:, 0, :]
     assert not np.isnan(out).any(), f"{ctx}: NaN in a compiled result {out!r}"
@@ -550,38 +574,40 @@ def _check_compiled(f, boxes, rng, ctx, n_pts=5):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(tree=trees(), c=st.sampled_from([0.0, 1.0, -2.5, 1e300, 710.0, 1e-320, 3.0]),
        data=st.data())
-def test_compiled_composites_extreme(tree, c, data):
+def test_compiled_composites_extreme(tree, c, data, backend):
     f = ca.Function("f", [ca.vertcat(X0, X1)], [_build(tree, c)])
     n = data.draw(st.integers(1, 3), label="n")
     boxes = [(data.draw(xbox([0.0, 1.0]), label="b0"), data.draw(xbox([0.0, 1.0]), label="b1"))
              for _ in range(n)]
     rng = data.draw(seeds(), label="rng")
-    _check_compiled(f, boxes, rng, f"{tree} (c={c})", n_pts=3)
+    _check_compiled(f, boxes, rng, f"{tree} (c={c})", n_pts=3, backend=backend)
 
 
-def test_overflow_does_not_narrow_tan_fmin_exp():
+def test_overflow_does_not_narrow_tan_fmin_exp(backend):
     """tan(fmin(exp(x0), x1)) on [710, 711] x [1, 2]: fmin is x1 there, and tan has a pole in
     [1, 2], so the enclosure must be the whole line (it was [-inf, -2.185], which contains
     neither tan(1.5) = 14.1 nor tan(1) = 1.56)."""
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [ca.tan(ca.fmin(ca.exp(x[0]), x[1]))])
-    out = cm.interval.inclusion(f)(np.array([[[710.0, 711.0], [1.0, 2.0]]]))[0][0, 0]
+    F = compiled(f, backend=backend)
+    out = F(np.array([[[710.0, 711.0], [1.0, 2.0]]]))[0][0, 0]
     assert out[0] == -INF and out[1] == INF
     # and with x1 below the pole, the enclosure is bounded and contains tan(x1)
-    out = cm.interval.inclusion(f)(np.array([[[710.0, 711.0], [1.0, 1.5]]]))[0][0, 0]
+    out = F(np.array([[[710.0, 711.0], [1.0, 1.5]]]))[0][0, 0]
     assert out[0] <= math.tan(1.0) and out[1] >= math.tan(1.5) and np.isfinite(out).all()
     _check_compiled(f, [((710.0, 711.0), (1.0, 2.0)), ((710.0, 711.0), (1.0, 1.5)),
-                        ((-INF, 711.0), (-1.0, 1.0))], np.random.default_rng(0), "tan-fmin-exp")
+                        ((-INF, 711.0), (-1.0, 1.0))], np.random.default_rng(0), "tan-fmin-exp",
+                    backend=backend)
 
 
-def test_undefined_constant_subexpression_stays_undefined():
+def test_undefined_constant_subexpression_stays_undefined(backend):
     """A subexpression folded at compile time to "possibly undefined" (log(-2.5)) must not
     turn into "any real" that a bounded operation (sin, atan) then makes informative."""
     x = ca.SX.sym("x")
     for e in (ca.sin(ca.log((x - x) - 2.5)) + x, ca.atan(ca.sqrt(ca.SX(-1.0))) * x,
               ca.tanh(ca.log(ca.SX(-1.0)) * x)):
         f = ca.Function("f", [x], [e])
-        out = cm.interval.inclusion(f)(np.array([[[1.0, 2.0]]]))[0][0, 0]
+        out = compiled(f, backend=backend)(np.array([[[1.0, 2.0]]]))[0][0, 0]
         assert out[0] == -INF and out[1] == INF, (e, out)
 
 
@@ -598,19 +624,19 @@ def test_undefined_constant_subexpression_stays_undefined():
     (lambda a, b: ca.tan(ca.fmin(ca.exp(a), b)), ((-INF, 711.0), (1.0, 2.0))),
     (lambda a, b: ca.cos(ca.fmin(2 * a, b)), ((1e308, MAX), (0.0, 4.0))),
 ])
-def test_compiled_overflow_cases(expr, box):
+def test_compiled_overflow_cases(expr, box, backend):
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [expr(x[0], x[1])])
-    _check_compiled(f, [box], np.random.default_rng(1), "case")
+    _check_compiled(f, [box], np.random.default_rng(1), "case", backend=backend)
 
 
-def test_reference_treats_a_nan_constant_as_undefined():
+def test_reference_treats_a_nan_constant_as_undefined(backend):
     """CasADi folds log((x0 - x0) - 2.5) to the constant NaN: the reference value of that
     graph is "undefined", not the number NaN (which no enclosure can contain)."""
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [ca.log((x[0] - x[0]) + -2.5)])
     assert R.eval_function(f, [[1.0, 2.0]])[0][0] is R.UNDEF
-    out = cm.interval.inclusion(f)(np.array([[[1.0, 2.0], [0.0, 1.0]]]))[0][0, 0]
+    out = compiled(f, backend=backend)(np.array([[[1.0, 2.0], [0.0, 1.0]]]))[0][0, 0]
     assert out[0] == -INF and out[1] == INF
 
 
@@ -677,7 +703,7 @@ _AFTER = {
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(e=st.sampled_from(sorted(_OVERFLOWING)), h=st.sampled_from(sorted(_COMBINE)),
        g=st.sampled_from(sorted(_AFTER)), data=st.data())
-def test_compiled_overflow_composites(e, h, g, data):
+def test_compiled_overflow_composites(e, h, g, data, backend):
     fe, (a, b) = _OVERFLOWING[e]
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [_AFTER[g](_COMBINE[h](fe(x[0]), x[1]))])
@@ -690,7 +716,7 @@ def test_compiled_overflow_composites(e, h, g, data):
         xbox([0.0, 1.0, float(mpmath.pi / 2)])), label="x1")
     rng = data.draw(seeds(), label="rng")
     _check_compiled(f, [((lo0, hi0), box1), ((a, b), box1)], rng, f"{g}({h}({e}(x0), x1))",
-                    n_pts=4)
+                    n_pts=4, backend=backend)
 
 
 def test_fold_keeps_possibly_undefined_constants_undefined():
