@@ -9,8 +9,37 @@ import numpy as np
 
 from .._validate import as_boxes
 from ..exceptions import DimensionError, UnboundedSetError
+from ..interval.compiler import InclusionFunction, inclusion
 
 __all__: list[str] = []
+
+
+def split_inclusion(fun: Any, name: str) -> tuple[Any, InclusionFunction | None]:
+    """``(function, compiled)`` of a solver argument that may be a compiled inclusion.
+
+    For an :class:`~casadi_cmpc.interval.InclusionFunction`: its (SX) casadi.Function and
+    the object itself, which the solver then evaluates instead of compiling the Function
+    again; for anything else: ``(fun, None)`` (checked by the caller). An inclusion built
+    with ``derived_outputs`` or ``evaluate`` (a restricted, internal form) is refused with
+    a ValueError.
+    """
+    if isinstance(fun, InclusionFunction):
+        if fun._keep is not None or fun._widen:
+            raise ValueError(
+                f"{name} is an InclusionFunction restricted with derived_outputs/evaluate; "
+                "pass the casadi.Function or cm.interval.inclusion(fun) instead")
+        return fun.fun, fun
+    return fun, None
+
+
+def inclusion_of(fun: ca.Function, kind: str, given: InclusionFunction | None
+                 ) -> InclusionFunction:
+    """The inclusion of ``fun`` of ``kind``: ``given`` when it is of that kind, else the
+    (cached) :func:`~casadi_cmpc.interval.inclusion`, with the backend of ``given``."""
+    if given is not None and given.kind == kind:
+        return given
+    backend = given.backend if given is not None else "auto"
+    return inclusion(fun, kind, backend=backend)
 
 
 def one_output_function(fun: Any, name: str, inputs: tuple[str, ...]) -> ca.Function:
@@ -20,7 +49,8 @@ def one_output_function(fun: Any, name: str, inputs: tuple[str, ...]) -> ca.Func
     it has another number of inputs than ``len(inputs)`` or more than one output.
     """
     if not isinstance(fun, ca.Function):
-        raise TypeError(f"{name} must be a casadi.Function; got {type(fun).__name__}")
+        raise TypeError(f"{name} must be a casadi.Function (or an InclusionFunction); got "
+                        f"{type(fun).__name__}")
     if fun.n_in() != len(inputs) or fun.n_out() != 1:
         takes = "one input" if len(inputs) == 1 else f"({', '.join(inputs)})"
         raise DimensionError(

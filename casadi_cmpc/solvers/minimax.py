@@ -23,7 +23,13 @@ import numpy as np
 
 from ..exceptions import CmpcWarning, DimensionError
 from ..interval.modal import SemanticExtension, _partition
-from ._common import one_output_function, positive_eps, single_box, thin
+from ._common import (
+    one_output_function,
+    positive_eps,
+    single_box,
+    split_inclusion,
+    thin,
+)
 from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
 from .result import _BracketResult, _format_point
 
@@ -191,8 +197,8 @@ class _Minimax:
         return grid[int(np.argmax(np.where(np.isfinite(mid), mid, -np.inf)))]
 
 
-def minimax(f: ca.Function, U: Any, W: Any, eps: float,
-            constraints: ca.Function | None = None, *, method: str = "auto",
+def minimax(f: Any, U: Any, W: Any, eps: float,
+            constraints: Any = None, *, method: str = "auto",
             options: dict[str, Any] | None = None, max_boxes: int = 1_000_000,
             time_limit: float | None = None, progress: bool | None = None) -> MinimaxResult:
     """Certified constrained minimax: ``min_u max_w f(u, w)`` s.t. ``g(u, w) <= 0`` for all w.
@@ -201,15 +207,17 @@ def minimax(f: ca.Function, U: Any, W: Any, eps: float,
 
     Parameters
     ----------
-    f : casadi.Function
-        Continuous scalar SX Function of ``(u, w)``.
+    f : casadi.Function or InclusionFunction
+        Continuous scalar SX Function of ``(u, w)`` (of an InclusionFunction: its Function,
+        from which the semantic extension is built; its natural form is shared through the
+        cache of :func:`casadi_cmpc.interval.inclusion`).
     U : Box or array_like, shape (m, 2)
         Decision box (bounded).
     W : Box or array_like, shape (l, 2)
         Disturbance box (bounded).
     eps : float
         u-boxes whose widest component is at most ``eps`` are not bisected (candidates).
-    constraints : casadi.Function, optional
+    constraints : casadi.Function or InclusionFunction, optional
         Continuous SX Function of ``(u, w)`` with a vector output ``g``; ``u`` is feasible when
         ``g(u, w) <= 0`` for **every** ``w ∈ W``.
     method : {"auto", "alg5.3"}
@@ -278,8 +286,9 @@ def minimax(f: ca.Function, U: Any, W: Any, eps: float,
     ub0 = single_box(U, "U")
     wb0 = single_box(W, "W")
     m, l = ub0.shape[0], wb0.shape[0]
-    f = _check_fun(f, "f", m, l, scalar=True)
-    g = None if constraints is None else _check_fun(constraints, "constraints", m, l, False)
+    f = _check_fun(split_inclusion(f, "f")[0], "f", m, l, scalar=True)
+    g = None if constraints is None else _check_fun(
+        split_inclusion(constraints, "constraints")[0], "constraints", m, l, False)
     opts: dict[str, Any] = {"w_depth": min(3 * l, 9), "mean_value": True}
     options = {} if options is None else options
     if not isinstance(options, dict):

@@ -18,7 +18,14 @@ import numpy as np
 
 from ..exceptions import DimensionError
 from ..interval.compiler import InclusionFunction
-from ._common import one_output_function, positive_eps, single_box, thin
+from ._common import (
+    inclusion_of,
+    one_output_function,
+    positive_eps,
+    single_box,
+    split_inclusion,
+    thin,
+)
 from .engine import OUTER, UNDECIDED, BoxFrontier, Status, branch_and_bound
 from .result import _BracketResult, _format_point
 
@@ -110,13 +117,14 @@ class _Search:
     """The state of one minimisation: inclusion functions and the certified upper bound."""
 
     def __init__(self, f: ca.Function, g: ca.Function | None, x0: np.ndarray, kind: str,
-                 local_solver: str | None) -> None:
-        self.F = InclusionFunction(f, kind)
-        self.F_point = self.F if kind == "natural" else InclusionFunction(f, "natural")
-        self.G = None if g is None else InclusionFunction(g, kind)
+                 local_solver: str | None, F: InclusionFunction | None = None,
+                 G: InclusionFunction | None = None) -> None:
+        self.F = inclusion_of(f, kind, F)
+        self.F_point = inclusion_of(f, "natural", F)
+        self.G = None if g is None else inclusion_of(g, kind, G)
         self.G_point = None
         if g is not None:
-            self.G_point = self.G if kind == "natural" else InclusionFunction(g, "natural")
+            self.G_point = inclusion_of(g, "natural", G)
         self.n = x0.shape[0]
         self.lo0, self.hi0 = x0[:, 0].copy(), x0[:, 1].copy()
         self.diam0 = float(np.max(self.hi0 - self.lo0)) if self.n else 0.0
@@ -258,8 +266,8 @@ class _Search:
 
 
 # ------------------------------------------------------------------------------ solver
-def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | None = None, *,
-             kind: str = "centered", local_solver: str | None = "ipopt",
+def minimize(f: Any, X0: Any, eps: float, constraints: Any = None, *,
+             kind: str | None = None, local_solver: str | None = "ipopt",
              max_boxes: int = 2_000_000, time_limit: float | None = None,
              progress: bool | None = None) -> MinimizeResult:
     """Certified global minimisation over a box, with inequality constraints (thesis Alg 4.2).
@@ -269,20 +277,23 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
 
     Parameters
     ----------
-    f : casadi.Function
+    f : casadi.Function or InclusionFunction
         The objective ``R^n -> R``: one input of ``n`` elements and one scalar output (an SX
-        Function; an MX Function is expanded).
+        Function; an MX Function is expanded). An already compiled
+        :class:`~casadi_cmpc.interval.InclusionFunction` is evaluated as given when it is of
+        the ``kind`` used (its Function serves for the local solver and the other forms).
     X0 : Box or array_like, shape (n, 2)
         The (bounded) search box.
     eps : float
         Undecided boxes whose widest component is at most ``eps`` are not bisected: they
         become candidates. Smaller ``eps`` narrows the bracket and the candidate boxes.
-    constraints : casadi.Function, optional
+    constraints : casadi.Function or InclusionFunction, optional
         ``g : R^n -> R^p``; the feasible set is ``{x in X0 : g(x) <= 0}`` (componentwise).
-    kind : {"centered", "natural"}
+    kind : {"centered", "natural"} or None
         Inclusion function used to bound ``f`` and ``g`` on boxes. The centered
         (mean-value) form, intersected with the natural one, shrinks quadratically with the
-        box width and prunes far better near minimisers.
+        box width and prunes far better near minimisers. None (default): the kind of ``f``
+        when it is an InclusionFunction, else ``"centered"``.
     local_solver : {"ipopt", None}
         ``"ipopt"``: a few local solves (CasADi ``nlpsol``) started from the most promising
         midpoints supply candidate points; their value and feasibility are then certified by
@@ -305,7 +316,7 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
     Raises
     ------
     TypeError
-        ``f`` or ``constraints`` is not a casadi.Function.
+        ``f`` or ``constraints`` is neither a casadi.Function nor an InclusionFunction.
     DimensionError
         ``f`` is not scalar or has several inputs/outputs; the input size of ``f`` or
         ``constraints`` differs from the dimension of ``X0``; ``X0`` is not a single box.
@@ -350,6 +361,7 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
     True
     """
     t0 = time.perf_counter()
+    f, F_given = split_inclusion(f, "f")
     f = _check_function(f, "f", None)
     if f.numel_out(0) != 1:
         raise DimensionError(
@@ -360,6 +372,8 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
         raise DimensionError(f"f must take at least one variable; '{f.name()}' takes none")
     x0 = single_box(X0, "X0", n)
     eps = positive_eps(eps)
+    if kind is None:
+        kind = F_given.kind if F_given is not None else "centered"
     kind_l = str(kind).lower()
     if kind_l not in _KINDS:
         raise ValueError(f"unknown kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
@@ -369,12 +383,14 @@ def minimize(f: ca.Function, X0: Any, eps: float, constraints: ca.Function | Non
     if int(max_boxes) < 1:
         raise ValueError(f"max_boxes must be at least 1; got {max_boxes}")
     g = None
+    G_given = None
     if constraints is not None:
+        constraints, G_given = split_inclusion(constraints, "constraints")
         g = _check_function(constraints, "constraints", n)
         if g.numel_out(0) == 0:
             g = None
 
-    search = _Search(f, g, x0, kind_l, local)
+    search = _Search(f, g, x0, kind_l, local, F_given, G_given)
     out = branch_and_bound(BoxFrontier.from_boxes(x0[None]), search.classify, eps,
                            max_boxes=int(max_boxes), time_limit=time_limit, keep_outer=False,
                            progress=progress, desc="minimize", on_level=search.on_level)

@@ -25,7 +25,7 @@ from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
 from ..interval.modal import SemanticExtension
 from ..sets.box import Box
 from ..sets.paving import Paving
-from ._common import positive_eps
+from ._common import positive_eps, split_inclusion
 from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
 
 __all__ = ["quantified_sivia"]
@@ -273,7 +273,7 @@ class _QuantifiedClassifier:
         return (in_a & (others == p - 1)).any(axis=1)
 
 
-def quantified_sivia(f: ca.Function, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
+def quantified_sivia(f: Any, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
                      method: str = "auto", options: dict[str, Any] | None = None,
                      split_ratio: float = 0.5, relative: bool = False,
                      max_boxes: int = 2_000_000, time_limit: float | None = None,
@@ -284,9 +284,11 @@ def quantified_sivia(f: ca.Function, X0: Any, U: Any, W: Any, Y: Any, eps: float
 
     Parameters
     ----------
-    f : casadi.Function
+    f : casadi.Function or InclusionFunction
         Continuous SX Function with inputs ``(x, u, w)`` (or ``(x, u)`` when ``W`` is None) and
-        one output of ``p = Y.dim`` elements.
+        one output of ``p = Y.dim`` elements. Of an InclusionFunction its Function is used
+        (the semantic extension needs the graph; its natural form is shared through the
+        cache of :func:`casadi_cmpc.interval.inclusion`).
     X0 : Box or array_like, shape (n, 2)
         The initial (bounded) box of states.
     U : Box or array_like, shape (m, 2)
@@ -380,8 +382,10 @@ def quantified_sivia(f: ca.Function, X0: Any, U: Any, W: Any, Y: Any, eps: float
     meth = str(method).lower()
     if meth not in _METHODS:
         raise ValueError(f"Unknown method '{method}'; valid methods: {', '.join(_METHODS)}")
+    f = split_inclusion(f, "f")[0]
     if not isinstance(f, ca.Function):
-        raise TypeError(f"f must be a casadi.Function; got {type(f).__name__}")
+        raise TypeError(f"f must be a casadi.Function or an InclusionFunction; got "
+                        f"{type(f).__name__}")
     n_in = 2 if W is None else 3
     if f.n_in() != n_in:
         raise DimensionError(

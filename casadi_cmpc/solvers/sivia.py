@@ -11,7 +11,7 @@ import numpy as np
 from .._validate import as_boxes
 from ..exceptions import DimensionError
 from ..interval import arith as _ar
-from ..interval.compiler import InclusionFunction
+from ..interval.compiler import InclusionFunction, inclusion
 from ..sets.base import SetBase
 from ..sets.box import Box
 from ..sets.paving import Paving
@@ -26,7 +26,7 @@ def _as_inclusion(f: Any, kind: str) -> InclusionFunction:
             raise DimensionError(
                 f"sivia needs a Function with one input and one output; '{f.name()}' has "
                 f"{f.n_in()} inputs and {f.n_out()} outputs (use casadi.vertcat to stack them)")
-        return InclusionFunction(f, kind)
+        return inclusion(f, kind)
     if isinstance(f, InclusionFunction):
         if f.n_in != 1 or f.n_out != 1:
             raise DimensionError(
@@ -383,7 +383,10 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     Parameters
     ----------
     f : casadi.Function or InclusionFunction
-        ``R^n -> R^m``, one input and one output (an SX Function; MX is expanded).
+        ``R^n -> R^m``, one input and one output (an SX Function; MX is expanded). A
+        casadi.Function is compiled with :func:`casadi_cmpc.interval.inclusion` (cached per
+        Function object); an InclusionFunction is used as given (its own kind and backend;
+        ``kind`` is then ignored).
     X0 : Box or array_like, shape (n, 2)
         The initial (bounded) box.
     Y : Box, Polytope, PolytopeUnion or another set of dimension m

@@ -57,6 +57,7 @@ from ..sets.base import SetBase
 from ..sets.box import Box
 from ..sets.polytope import Polytope, PolytopeUnion
 from ..sets.zonotope import Zonotope
+from ._common import inclusion_of, split_inclusion
 from .engine import INNER, OUTER, Status, branch_and_bound
 
 __all__ = ["ZonotopeFrontier", "ZonotopePaving", "zonotope_classifier", "zonotope_sivia",
@@ -641,6 +642,10 @@ class _Image:
                 raise ValueError("the dimension of the identity map is unknown")
             self.n = self.m = n_x
             return
+        given = None  # an InclusionFunction passed as f: evaluated as given
+        if isinstance(f, InclusionFunction):
+            f, given = split_inclusion(f, "f")
+        source = None  # the SX Function of f, whose (cached) inclusions are evaluated
         if isinstance(f, ca.Function):
             if f.n_in() != 1 or f.n_out() != 1:
                 raise DimensionError(
@@ -649,6 +654,7 @@ class _Image:
                     "casadi.vertcat to stack them)")
             if not f.is_a("SXFunction"):
                 f = f.expand()
+            source = f
             if W is not None:
                 raise ModelError("W is only used with a Model that has a disturbance w")
             x = ca.SX.sym("x", f.numel_in(0))
@@ -675,8 +681,8 @@ class _Image:
             elif W is not None:
                 raise ModelError(f"model '{f.name}' has no disturbance; do not pass W")
         else:
-            raise TypeError(f"f must be None (identity), a casadi.Function or a Model; got "
-                            f"{type(f).__name__}")
+            raise TypeError(f"f must be None (identity), a casadi.Function, an "
+                            f"InclusionFunction or a Model; got {type(f).__name__}")
         self.n = int(x.numel())
         self.m = int(expr.numel())
         if self.W is None:
@@ -693,9 +699,18 @@ class _Image:
         # interval Jacobian whose rows are [-inf, inf] on boxes where they may jump
         self.jac = JacobianInclusion(fun, wrt=0)
         point = "centered" if self.W is not None and not self.discontinuous else "natural"
-        self.point = InclusionFunction(fun, point)
-        self.box = InclusionFunction(fun, box_form) if box_form else None
+        # The inclusions of f itself (its output flattened column-major, structural zeros
+        # [0, 0]: the layout of fun's dense vector) come from the cache of inclusion(), or are
+        # the one given; a Model's map is compiled here.
+        self._source, self._given = source, given
+        self.point = self._inclusion(point)
+        self.box = self._inclusion(box_form) if box_form else None
         self._hull: InclusionFunction | None = self.box
+
+    def _inclusion(self, kind: str) -> InclusionFunction:
+        if self._source is None:
+            return InclusionFunction(self.fun, kind)
+        return inclusion_of(self._source, kind, self._given)
 
     def __call__(self, fr: ZonotopeFrontier
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -717,7 +732,7 @@ class _Image:
             # rows without a mean-value enclosure: the interval hull of f over the bounding
             # box, as an independent box generator (zero generator row)
             if self._hull is None:
-                self._hull = InclusionFunction(self.fun, "natural")
+                self._hull = self._inclusion("natural")
             hull = boxes if boxes is not None else \
                 self._hull.evaluate_unchecked([Xb] + extra, N)[0]
             fp = np.where(rows[..., None], fp, hull)
@@ -747,10 +762,11 @@ def zonotope_classifier(f: Any, Y: Any, *, n: int | None = None, X: Any = None, 
 
     Parameters
     ----------
-    f : None, casadi.Function or Model
-        ``None`` for the identity; a Function ``R^n -> R^m`` (one input, one output); or a
-        Model without inputs (e.g. ``model.closed_loop(K)``), robust over its disturbance
-        box ``W``.
+    f : None, casadi.Function, InclusionFunction or Model
+        ``None`` for the identity; a Function ``R^n -> R^m`` (one input, one output), or its
+        compiled :class:`~casadi_cmpc.interval.InclusionFunction` (evaluated as given where
+        its kind is used; its Function gives the Jacobian); or a Model without inputs (e.g.
+        ``model.closed_loop(K)``), robust over its disturbance box ``W``.
     Y : Box, Polytope, PolytopeUnion or another set of dimension m
         The target.
     n : int, optional
@@ -944,10 +960,11 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
 
     Parameters
     ----------
-    f : None, casadi.Function or Model
+    f : None, casadi.Function, InclusionFunction or Model
         The map: ``None`` for the identity (then the result approximates ``X0 ∩ Y``); a
         Function ``R^n -> R^m`` with one input and one output (stack several conditions
-        with ``casadi.vertcat``); or a Model without inputs (a closed loop,
+        with ``casadi.vertcat``), or its compiled InclusionFunction (see
+        :func:`zonotope_classifier`); or a Model without inputs (a closed loop,
         ``model.closed_loop(K)``), whose successor must lie in Y for every disturbance in
         ``W``.
     X0 : Zonotope, Box or Polytope
