@@ -20,6 +20,9 @@ MODULES = [
     "casadi_cmpc.solvers.minimax",
     "casadi_cmpc.solvers.result",
     "casadi_cmpc.interval.modal",
+    "casadi_cmpc.mpc.contractive",
+    "casadi_cmpc.mpc.linear",
+    "casadi_cmpc.mpc.simulate",
 ]
 
 
