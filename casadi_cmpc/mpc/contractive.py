@@ -310,9 +310,15 @@ class _Consts:
         self.syms: list[ca.SX] = []
         self.vals: list[np.ndarray] = []
 
-    def __call__(self, value: Any, name: str) -> Any:
+    def __call__(self, value: Any, name: str, fold_safe: bool = False) -> Any:
+        """The constant ``value``: a number, or (exact graph) a symbol.
+
+        ``fold_safe=True`` keeps a number also in the exact graph: for constants that only
+        meet non-constant expressions (so CasADi has nothing to fold them with), such as
+        ``x_ref`` in ``x(i) - x_ref`` once the model's own literals are symbols.
+        """
         a = np.asarray(value, dtype=float)
-        if not self.exact:
+        if not self.exact or fold_safe:
             return float(a) if a.ndim == 0 else ca.DM(a)
         shape = (1, 1) if a.ndim == 0 else ((a.size, 1) if a.ndim == 1 else a.shape)
         sym = ca.SX.sym(name, *shape)
@@ -353,14 +359,14 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool) -> dict[str, Any]:
     xs = [x0]
     for i in range(N):
         xs.append(f(xs[-1], us[i * m:(i + 1) * m], w)[0])
-    xr, ur = K(mpc.x_ref, "x_ref"), K(mpc.u_ref, "u_ref")
-    Q, R, P = K(mpc.Q, "Q"), K(mpc.R, "R"), K(mpc.P, "P")
+    xr, ur = K(mpc.x_ref, "x_ref", True), K(mpc.u_ref, "u_ref", True)
+    Q, R, P = K(mpc.Q, "Q", True), K(mpc.R, "R", True), K(mpc.P, "P", True)
     cost = 0
     for i in range(N):
         v = us[i * m:(i + 1) * m] - ur
         e = xs[i + 1] - xr
         cost = cost + ca.mtimes([v.T, R, v]) + ca.mtimes([e.T, P if i == N - 1 else Q, e])
-    C = K(mpc.contract, "C")
+    C = K(mpc.contract, "C", True)
     eN = ca.mtimes(C, xs[N] - xr)
     e0 = ca.mtimes(C, x0 - xr)
     parts, lo, hi, labels = [], [], [], []
@@ -387,11 +393,11 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool) -> dict[str, Any]:
             labels += [f"constraint g_x[{j}](x({i + 1})) <= 0" for j in range(k)]
     if mpc.terminal is not None:
         Ht, ht = mpc.terminal.A, mpc.terminal.b
-        parts.append(ca.mtimes(K(Ht, "H"), xs[N]) - K(ht, "h"))
+        parts.append(ca.mtimes(K(Ht, "H", True), xs[N]) - K(ht, "h", True))
         lo.append(np.full(Ht.shape[0], -np.inf))
         hi.append(np.zeros(Ht.shape[0]))
         labels += [f"terminal row {r}: H x({N}) <= h" for r in range(Ht.shape[0])]
-    alpha = K(mpc.alpha, "alpha")
+    alpha = K(mpc.alpha, "alpha", True)
     if mpc.gauge is not None:
         Pa, Pb = K(mpc.gauge.A, "gauge_A"), K(mpc.gauge.b, "gauge_b")
         scale = Pb - ca.mtimes(Pa, xr)  # the gauge's level 1 is the polytope
@@ -472,6 +478,8 @@ class _Horizon:
         self.ubz = np.concatenate([np.tile(model.U.hi, N), np.full(extra_x.numel(), np.inf)])
         self.nlp = {"x": zz, "p": ca.vertcat(x0, s), "f": cost,
                     "g": ca.vertcat(fl["common"], c_nlp)}
+        self.bounds = {"lbx": ca.DM(self.lbz), "ubx": ca.DM(self.ubz),
+                       "lbg": ca.DM(self.lbg), "ubg": ca.DM(self.ubg)}
         plugin, opts = _solver_options(mpc.solver, mpc.solver_options)
         self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", plugin, self.nlp, opts)
 
@@ -667,6 +675,7 @@ class ContractiveMPC:
         self._horizons: dict[int, Any] = {}
         self._warm: dict[int, np.ndarray] = {}
         self._lam: dict[int, tuple[Any, Any]] = {}
+        self._claims: dict[int, str] = {}
         self._queue: list[tuple[np.ndarray, np.ndarray, MPCResult]] = []
         self.last_result: MPCResult | None = None
         self.last_info: dict | None = None
@@ -904,11 +913,10 @@ class ContractiveMPC:
         lam = self._lam.get(N) if start is None else None
         t = time.perf_counter()
         if lam is not None:
-            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lbx=h.lbz, ubx=h.ubz,
-                           lbg=h.lbg, ubg=h.ubg, lam_x0=lam[0], lam_g0=lam[1])
+            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lam_x0=lam[0], lam_g0=lam[1],
+                           **h.bounds)
         else:
-            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lbx=h.lbz, ubx=h.ubz,
-                           lbg=h.lbg, ubg=h.ubg)
+            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), **h.bounds)
         dt = time.perf_counter() - t
         stats = {"solver": self.solver, "solve_time": dt, "_fun": h.solver}
         z = np.asarray(sol["x"], dtype=float).ravel()
@@ -953,19 +961,19 @@ class ContractiveMPC:
     def _check(self, x: np.ndarray, N: int, useq: np.ndarray) -> tuple[bool, dict]:
         """Interval re-evaluation of ``useq`` from the exact ``x``: (verified, details)."""
         h = self._get_check(N)
-        z = h.z(useq.reshape(1, -1), x)[0]
-        box = np.stack([z, z], axis=-1)[None]
+        z = np.concatenate((useq.ravel(), x, h.param_values))
+        box = np.empty((1, z.size, 2))
+        box[0, :, 0] = z
+        box[0, :, 1] = z
         Y = h.check_inclusion.evaluate_unchecked([box], 1)[0][0]
-        ok_lo = Y[:, 0] >= h.check_lo
-        ok_hi = Y[:, 1] <= h.check_hi
-        ok = ok_lo & ok_hi
+        # slack >= 0 on every row <=> verified (NaN-free by the inclusion's contract)
         slack = np.minimum(Y[:, 0] - h.check_lo, h.check_hi - Y[:, 1])
-        details = {"min_margin": float(np.min(slack)),
-                   "contraction_upper": float(Y[-1, 1]),
-                   "_x_mid": 0.5 * (Y[:h.n_state_rows, 0] + Y[:h.n_state_rows, 1])}
-        if ok.all():
+        margin = float(slack.min())
+        details = {"min_margin": margin, "contraction_upper": float(Y[-1, 1]),
+                   "_x_mid": 0.5 * Y[:h.n_state_rows, 0] + 0.5 * Y[:h.n_state_rows, 1]}
+        if margin >= 0:
             return True, details
-        bad = int(np.flatnonzero(~ok)[0])
+        bad = int(np.flatnonzero(~(slack >= 0))[0])
         details["failed"] = self._describe_row(h, bad, Y[bad])
         return False, details
 
@@ -1184,10 +1192,13 @@ class ContractiveMPC:
             xp = np.vstack([x, x_mid.reshape(N, self.model.n)])
         if proofs:
             details["proofs"] = proofs
-        w = (f" with the nominal disturbance w = {self.w_nominal.tolist()}"
-             if self.model.l else "")
-        claim = (f"the sequence keeps x(1..{N}) in X, satisfies every extra constraint and "
-                 f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}")
+        claim = self._claims.get(N)
+        if claim is None:
+            w = (f" with the nominal disturbance w = {self.w_nominal.tolist()}"
+                 if self.model.l else "")
+            claim = self._claims[N] = (
+                f"the sequence keeps x(1..{N}) in X, satisfies every extra constraint and "
+                f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}")
         if self.certify_optimal:
             details["optimal_bracket"] = self._optimality(x, N)
         cert = Certificate("verified", True, claim,
