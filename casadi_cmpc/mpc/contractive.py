@@ -310,15 +310,10 @@ class _Consts:
         self.syms: list[ca.SX] = []
         self.vals: list[np.ndarray] = []
 
-    def __call__(self, value: Any, name: str, fold_safe: bool = False) -> Any:
-        """The constant ``value``: a number, or (exact graph) a symbol.
-
-        ``fold_safe=True`` keeps a number also in the exact graph: for constants that only
-        meet non-constant expressions (so CasADi has nothing to fold them with), such as
-        ``x_ref`` in ``x(i) - x_ref`` once the model's own literals are symbols.
-        """
+    def __call__(self, value: Any, name: str) -> Any:
+        """The constant ``value``: a number (float graph) or a symbol (exact graph)."""
         a = np.asarray(value, dtype=float)
-        if not self.exact or fold_safe:
+        if not self.exact:
             return float(a) if a.ndim == 0 else ca.DM(a)
         shape = (1, 1) if a.ndim == 0 else ((a.size, 1) if a.ndim == 1 else a.shape)
         sym = ca.SX.sym(name, *shape)
@@ -359,14 +354,14 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool) -> dict[str, Any]:
     xs = [x0]
     for i in range(N):
         xs.append(f(xs[-1], us[i * m:(i + 1) * m], w)[0])
-    xr, ur = K(mpc.x_ref, "x_ref", True), K(mpc.u_ref, "u_ref", True)
-    Q, R, P = K(mpc.Q, "Q", True), K(mpc.R, "R", True), K(mpc.P, "P", True)
+    xr, ur = K(mpc.x_ref, "x_ref"), K(mpc.u_ref, "u_ref")
+    Q, R, P = K(mpc.Q, "Q"), K(mpc.R, "R"), K(mpc.P, "P")
     cost = 0
     for i in range(N):
         v = us[i * m:(i + 1) * m] - ur
         e = xs[i + 1] - xr
         cost = cost + ca.mtimes([v.T, R, v]) + ca.mtimes([e.T, P if i == N - 1 else Q, e])
-    C = K(mpc.contract, "C", True)
+    C = K(mpc.contract, "C")
     eN = ca.mtimes(C, xs[N] - xr)
     e0 = ca.mtimes(C, x0 - xr)
     parts, lo, hi, labels = [], [], [], []
@@ -393,11 +388,11 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool) -> dict[str, Any]:
             labels += [f"constraint g_x[{j}](x({i + 1})) <= 0" for j in range(k)]
     if mpc.terminal is not None:
         Ht, ht = mpc.terminal.A, mpc.terminal.b
-        parts.append(ca.mtimes(K(Ht, "H", True), xs[N]) - K(ht, "h", True))
+        parts.append(ca.mtimes(K(Ht, "H"), xs[N]) - K(ht, "h"))
         lo.append(np.full(Ht.shape[0], -np.inf))
         hi.append(np.zeros(Ht.shape[0]))
         labels += [f"terminal row {r}: H x({N}) <= h" for r in range(Ht.shape[0])]
-    alpha = K(mpc.alpha, "alpha", True)
+    alpha = K(mpc.alpha, "alpha")
     if mpc.gauge is not None:
         Pa, Pb = K(mpc.gauge.A, "gauge_A"), K(mpc.gauge.b, "gauge_b")
         scale = Pb - ca.mtimes(Pa, xr)  # the gauge's level 1 is the polytope
@@ -425,17 +420,31 @@ class _Horizon:
         model = mpc.model
         n, m = model.n, model.m
         self.n, self.m = n, m
-        # -- exact graph: the certificate, the search over U^N, the optimality bracket
+        # -- exact graph: the certificate, the search over U^N, the optimality bracket.
+        # Every constant of the model, the constraints and the controller is a symbol fed as
+        # a thin interval. Constants that CasADi still creates while simplifying the
+        # composition (a - a -> 0, then acos(0) folded to a float) are lifted again and fed
+        # as intervals widened like the compiler's derived constants.
+        from ..interval._derivative import ParamGraph
+        from ..interval.compiler import _widen_constant
+
         ex = _graph(mpc, N, exact=True)
         z = ca.vertcat(ex["us"], ex["x0"], ex["params"])
-        self.param_values = ex["values"]
-        self.check_fun = ca.Function(f"check_{N}", [z], [ca.vertcat(ex["common"],
-                                                                     ex["c_val"])])
+        raw = ca.Function(f"raw_{N}", [z], [ca.vertcat(ex["common"], ex["c_val"]),
+                                            ex["cost"]])
+        pg = ParamGraph(raw)
+        full = ca.vertcat(pg.inputs[0], pg.params)
+        made_lo, made_hi = (np.array([_widen_constant(v)[i] for v in pg.values])
+                            for i in (0, 1))
+        self.param_lo = np.concatenate([ex["values"], made_lo])
+        self.param_hi = np.concatenate([ex["values"], made_hi])
+        self.n_created = pg.values.size
+        self.check_fun = ca.Function(f"check_{N}", [full], [pg.outputs[0]])
         self.check_lo = np.concatenate([ex["c_lo"], [-np.inf]])
         self.check_hi = np.concatenate([ex["c_hi"], [0.0]])
         self.labels = ex["labels"]
         self.n_state_rows = n * N
-        self.exact_cost = ca.Function(f"cost_{N}", [z], [ex["cost"]])
+        self.exact_cost = ca.Function(f"cost_{N}", [full], [pg.outputs[1]])
         self._check_incl: InclusionFunction | None = None
         # -- float graph: the local solver, predictions and ranking of candidates
         fl = _graph(mpc, N, exact=False)
@@ -489,12 +498,19 @@ class _Horizon:
             self._check_incl = InclusionFunction(self.check_fun, "natural")
         return self._check_incl
 
-    def z(self, useqs: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Rows ``[u_seq, x, constants]`` of the exact graph's input, shape (K, dim)."""
+    def boxes(self, useqs: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Boxes ``[u_seq, x, constants]`` of the exact graph's input, shape (K, dim, 2):
+        thin in ``u_seq`` and ``x``."""
         k = useqs.shape[0]
-        return np.concatenate([useqs, np.broadcast_to(x, (k, x.size)),
-                               np.broadcast_to(self.param_values,
-                                               (k, self.param_values.size))], axis=1)
+        out = np.empty((k, useqs.shape[1] + x.size + self.param_lo.size, 2))
+        j = useqs.shape[1]
+        out[:, :j, 0] = useqs
+        out[:, :j, 1] = useqs
+        out[:, j:j + x.size, 0] = x
+        out[:, j:j + x.size, 1] = x
+        out[:, j + x.size:, 0] = self.param_lo
+        out[:, j + x.size:, 1] = self.param_hi
+        return out
 
 
 # ------------------------------------------------------------------------- controller
@@ -961,10 +977,7 @@ class ContractiveMPC:
     def _check(self, x: np.ndarray, N: int, useq: np.ndarray) -> tuple[bool, dict]:
         """Interval re-evaluation of ``useq`` from the exact ``x``: (verified, details)."""
         h = self._get_check(N)
-        z = np.concatenate((useq.ravel(), x, h.param_values))
-        box = np.empty((1, z.size, 2))
-        box[0, :, 0] = z
-        box[0, :, 1] = z
+        box = h.boxes(useq.reshape(1, -1), x)
         Y = h.check_inclusion.evaluate_unchecked([box], 1)[0][0]
         # slack >= 0 on every row <=> verified (NaN-free by the inclusion's contract)
         slack = np.minimum(Y[:, 0] - h.check_lo, h.check_hi - Y[:, 1])
@@ -1083,8 +1096,7 @@ class ContractiveMPC:
                            "elapsed": time.perf_counter() - t,
                            "how": "a sampled sequence passed the interval check"}
         # 2. SIVIA over U^N x {x}
-        pv = h.param_values
-        Z = Box(np.concatenate([Ulo, x, pv]), np.concatenate([Uhi, x, pv]))
+        Z = Box(np.concatenate([Ulo, x, h.param_lo]), np.concatenate([Uhi, x, h.param_hi]))
         Y = Box(h.check_lo, h.check_hi)
         pav = sivia(F, Z, Y, self.search_eps, max_boxes=self.search_max_boxes,
                     time_limit=self.search_time_limit, keep_outer=False, progress=False)
@@ -1133,8 +1145,7 @@ class ContractiveMPC:
                        N: int) -> np.ndarray | None:
         if cand.shape[0] == 0:
             return None
-        z = h.z(cand, x)
-        Y = F.evaluate_unchecked([np.stack([z, z], axis=-1)], z.shape[0])[0]
+        Y = F.evaluate_unchecked([h.boxes(cand, x)], cand.shape[0])[0]
         ok = ((Y[:, :, 0] >= h.check_lo) & (Y[:, :, 1] <= h.check_hi)).all(axis=1)
         if not ok.any():
             return None
@@ -1160,9 +1171,8 @@ class ContractiveMPC:
         from ..solvers.minimize import minimize
 
         h = self._get_check(N)
-        pv = h.param_values
-        Z = Box(np.concatenate([np.tile(self.model.U.lo, N), x, pv]),
-                np.concatenate([np.tile(self.model.U.hi, N), x, pv]))
+        Z = Box(np.concatenate([np.tile(self.model.U.lo, N), x, h.param_lo]),
+                np.concatenate([np.tile(self.model.U.hi, N), x, h.param_hi]))
         zs = ca.SX.sym("z", h.check_fun.numel_in(0))
         gv = h.check_fun(zs)
         rows = []

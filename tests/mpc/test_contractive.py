@@ -451,3 +451,22 @@ def test_fixed_input_component_and_small_magnitudes():
     assert r.certificate.label in ("verified", "undecided", "unverified")
     if r.certificate.label == "verified":
         _check_sequence(model, np.array([0.2, 0.6, 0.9]) * s, r.u_seq, 0.95, np.inf)
+
+
+def test_constants_casadi_creates_while_composing_are_widened():
+    # f1 = 0.3 is constant, so x1(1) - 0.3 simplifies to 0 and acos(0) folds to fl(pi/2):
+    # the exact graph lifts such created constants and widens them
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    model = cm.Model(x=x, u=u, f=ca.vertcat(0.3, ca.acos(x[0] - 0.3) + u),
+                     X=cm.Box([0, 0], [1, 3]), U=cm.Box([-0.5], [0.5]))
+    half_pi = 1.5707963267948966  # fl(pi/2) = acos(0) in floats: f(x_ref, 0) == x_ref
+    ctrl = ContractiveMPC(model, horizon=2, alpha=1e-3, norm=np.inf, x_ref=[0.3, half_pi])
+    r = ctrl.solve([0.3, np.nextafter(half_pi, 9)])
+    # exactly, x2(2) = pi/2 + u(1): |e_N| / |e_0| is about 0.276 > alpha for every u near 0
+    assert r.certificate.label != "verified"
+    h = ctrl._get(2)
+    consts = [h.check_fun.instruction_constant(k) for k in range(h.check_fun.n_instructions())
+              if h.check_fun.instruction_id(k) == ca.OP_CONST]
+    assert not consts  # every constant is an input: thin (exact) or widened (created)
+    assert h.n_created >= 1 and (h.param_lo <= h.param_hi).all()
