@@ -98,8 +98,9 @@ class MPCResult(Result):
         The control sequence (the best available one; see ``certificate``).
     x_pred : ndarray (N + 1, n)
         Predicted states ``x(0) = x, ..., x(N)`` with the nominal w: for a verified
-        sequence the midpoints of the verified enclosures (equal to the float simulation
-        up to rounding), otherwise the float simulation.
+        sequence the midpoints of the verified enclosures (the exact prediction lies within
+        half their width, usually a few ulps; more where the model is ill-conditioned),
+        otherwise the float simulation.
     cost : float
         Value of (4.22) at ``u_seq`` (NaN when there is no sequence).
     horizon : int or None
@@ -111,7 +112,8 @@ class MPCResult(Result):
         ``iter_count`` of the local solver when the sequence was not verified, or always
         with ``solver_stats=True``.
     mode : str
-        ``"mpc"``, ``"at_reference"`` or ``"local_law"``.
+        ``"mpc"``, ``"at_reference"``, ``"local_law"`` or ``"nothing_to_contract"``
+        (``C (x - x_ref)`` is 0 or underflows while ``x != x_ref``).
     """
 
     x: np.ndarray
@@ -868,7 +870,7 @@ class ContractiveMPC:
                 xk, self.u_ref.copy(), "unverified",
                 f"the contracted distance ||C (x - x_ref)|| = {r0:.3g} is 0 or below "
                 f"{_TINY:g}: there is nothing to contract; u_ref is applied and nothing is "
-                "claimed", t0, mode="at_reference")
+                "claimed", t0, mode="nothing_to_contract")
         elif self._law is not None and self._in_local_set(xk):
             u = np.asarray(self._law(xk), dtype=float).reshape(self.model.m)
             res = self._special(xk, u, "local_law",
