@@ -95,3 +95,44 @@ def as_points(data: Any, d: int | None = None, name: str = "x") -> tuple[np.ndar
         raise DimensionError(
             f"{name} has the wrong dimension; expected {d} instead of {arr.shape[1]}")
     return arr, batched
+
+
+def weight_matrix(M: Any, d: int, name: str, definite: bool, default: np.ndarray | None
+            ) -> np.ndarray:
+    if M is None:
+        return np.eye(d) if default is None else default
+    W = np.asarray(M, dtype=float)
+    if W.ndim == 0 or (W.ndim == 1 and W.size == 1 and d == 1):
+        W = W.reshape(1, 1) * np.eye(d) if W.size == 1 else W
+        W = np.atleast_2d(W)
+    if W.ndim == 1 and W.size == d:
+        W = np.diag(W)
+    if W.shape == (1, 1) and d > 1:
+        W = W[0, 0] * np.eye(d)
+    if W.shape != (d, d):
+        raise DimensionError(f"{name} must be a ({d}, {d}) matrix (or a scalar or a "
+                             f"length-{d} diagonal); got shape {np.shape(M)}")
+    if not np.isfinite(W).all():
+        raise ValueError(f"{name} must be finite; got {W.tolist()}")
+    if not np.allclose(W, W.T, rtol=1e-12, atol=1e-12 * (1 + np.abs(W).max())):
+        raise ValueError(f"{name} must be symmetric; got {W.tolist()}")
+    ev = np.linalg.eigvalsh(0.5 * (W + W.T))
+    tol = 1e-12 * max(1.0, float(np.abs(ev).max()))
+    if definite and ev.min() <= tol:
+        raise ValueError(f"{name} must be symmetric positive definite; its smallest "
+                         f"eigenvalue is {ev.min():.3g}")
+    if not definite and ev.min() < -tol:
+        raise ValueError(f"{name} must be symmetric positive semidefinite; its smallest "
+                         f"eigenvalue is {ev.min():.3g}")
+    return 0.5 * (W + W.T)
+
+
+def float_vector(v: Any, d: int, name: str, default: np.ndarray) -> np.ndarray:
+    if v is None:
+        return default.copy()
+    a = np.asarray(v, dtype=float).reshape(-1)
+    if a.size != d:
+        raise DimensionError(f"{name} must have {d} elements; got shape {np.shape(v)}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite; got {a.tolist()}")
+    return a

@@ -1,6 +1,6 @@
 """Contractive MPC controllers and closed-loop simulation."""
 
-from .contractive import Certificate, ContractiveMPC, MPCResult
+from .contractive import ContractiveMPC, MPCResult
 from .simulate import Trajectory, simulate
 
-__all__ = ["Certificate", "ContractiveMPC", "MPCResult", "Trajectory", "simulate"]
+__all__ = ["ContractiveMPC", "MPCResult", "Trajectory", "simulate"]

@@ -18,21 +18,23 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from .._validate import float_vector as _vector
+from .._validate import weight_matrix as _weight
 from ..exceptions import DimensionError, ModelError
 from ..interval.compiler import InclusionFunction, _op_name
 from ..model import Model
 from ..sets.box import Box
 from ..sets.polytope import Polytope
 from ..solvers.engine import Status
-from ..solvers.result import Result
+from ..solvers.result import Certificate, Result
 
-__all__ = ["Certificate", "ContractiveMPC", "MPCResult"]
+__all__ = ["ContractiveMPC", "MPCResult"]
 
 _SOLVERS = ("ipopt", "sqp", "lp")
 #: Contracted distances below this are treated as 0 (their reciprocal would overflow).
@@ -41,44 +43,6 @@ _MODES = ("receding", "sequence")
 
 
 # ----------------------------------------------------------------------------- results
-@dataclass(frozen=True, eq=False)
-class Certificate:
-    """What was proven about one answer, in words and numbers.
-
-    Attributes
-    ----------
-    label : str
-        ``"verified"`` (the returned sequence satisfies every constraint, proven by interval
-        arithmetic), ``"unverified"`` (the check failed or was switched off: nothing is
-        claimed), ``"proved_infeasible"`` (no admissible sequence exists for any horizon
-        tried, proven by set inversion or an exact LP certificate), ``"undecided"`` (a search
-        budget ran out before a proof either way), ``"at_reference"`` (the state is the
-        reference: ``u_ref`` is applied), ``"local_law"`` (the state is in the set of the
-        local law, which is applied).
-    proved : bool or None
-        True when the claim is proven, False when its negation is proven, None otherwise.
-    claim : str
-        The statement the label refers to.
-    reason : str
-        How it was decided, or why it was not.
-    details : dict
-        Numbers: margins of the verified constraints, proofs per horizon (boxes, seconds),
-        the optimality bracket when requested.
-    counterexample : ndarray or None
-        A point that disproves the claim, when one was found.
-    """
-
-    label: str
-    proved: bool | None
-    claim: str
-    reason: str
-    details: dict = field(default_factory=dict)
-    counterexample: np.ndarray | None = None
-
-    def __repr__(self) -> str:
-        return f"Certificate({self.label!r}, proved={self.proved}, reason={self.reason!r})"
-
-
 @dataclass(frozen=True, eq=False, kw_only=True, repr=False)
 class MPCResult(Result):
     """One solve of :class:`ContractiveMPC` from the state ``x``.
@@ -157,47 +121,6 @@ def _alpha(alpha: Any) -> float:
         raise ValueError(f"alpha must be a number in (0, 1]; got {alpha!r}") from None
     if isinstance(alpha, (bool, np.bool_)) or not (0.0 < a <= 1.0):
         raise ValueError(f"the contraction parameter alpha must lie in (0, 1]; got {alpha!r}")
-    return a
-
-
-def _weight(M: Any, d: int, name: str, definite: bool, default: np.ndarray | None
-            ) -> np.ndarray:
-    if M is None:
-        return np.eye(d) if default is None else default
-    W = np.asarray(M, dtype=float)
-    if W.ndim == 0 or (W.ndim == 1 and W.size == 1 and d == 1):
-        W = W.reshape(1, 1) * np.eye(d) if W.size == 1 else W
-        W = np.atleast_2d(W)
-    if W.ndim == 1 and W.size == d:
-        W = np.diag(W)
-    if W.shape == (1, 1) and d > 1:
-        W = W[0, 0] * np.eye(d)
-    if W.shape != (d, d):
-        raise DimensionError(f"{name} must be a ({d}, {d}) matrix (or a scalar or a "
-                             f"length-{d} diagonal); got shape {np.shape(M)}")
-    if not np.isfinite(W).all():
-        raise ValueError(f"{name} must be finite; got {W.tolist()}")
-    if not np.allclose(W, W.T, rtol=1e-12, atol=1e-12 * (1 + np.abs(W).max())):
-        raise ValueError(f"{name} must be symmetric; got {W.tolist()}")
-    ev = np.linalg.eigvalsh(0.5 * (W + W.T))
-    tol = 1e-12 * max(1.0, float(np.abs(ev).max()))
-    if definite and ev.min() <= tol:
-        raise ValueError(f"{name} must be symmetric positive definite; its smallest "
-                         f"eigenvalue is {ev.min():.3g}")
-    if not definite and ev.min() < -tol:
-        raise ValueError(f"{name} must be symmetric positive semidefinite; its smallest "
-                         f"eigenvalue is {ev.min():.3g}")
-    return 0.5 * (W + W.T)
-
-
-def _vector(v: Any, d: int, name: str, default: np.ndarray) -> np.ndarray:
-    if v is None:
-        return default.copy()
-    a = np.asarray(v, dtype=float).reshape(-1)
-    if a.size != d:
-        raise DimensionError(f"{name} must have {d} elements; got shape {np.shape(v)}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"{name} must be finite; got {a.tolist()}")
     return a
 
 

@@ -9,7 +9,7 @@ effort spent (``nit``, ``n_boxes``, ``elapsed``). Subclasses add the solver's an
 from __future__ import annotations
 
 import operator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -17,7 +17,7 @@ import numpy as np
 from ..exceptions import DimensionError
 from .engine import Status
 
-__all__ = ["Result"]
+__all__ = ["Certificate", "Result"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -186,3 +186,41 @@ class _BracketResult(Result):
 def _format_point(p: np.ndarray | None) -> str:
     """A point for a repr: ``None`` or its entries to 6 digits."""
     return "None" if p is None else np.array2string(np.asarray(p), precision=6)
+
+
+@dataclass(frozen=True, eq=False)
+class Certificate:
+    """What was proven about one answer, in words and numbers.
+
+    Attributes
+    ----------
+    label : str
+        ``"verified"`` (the returned sequence satisfies every constraint, proven by interval
+        arithmetic), ``"unverified"`` (the check failed or was switched off: nothing is
+        claimed), ``"proved_infeasible"`` (no admissible sequence exists for any horizon
+        tried, proven by set inversion or an exact LP certificate), ``"undecided"`` (a search
+        budget ran out before a proof either way), ``"at_reference"`` (the state is the
+        reference: ``u_ref`` is applied), ``"local_law"`` (the state is in the set of the
+        local law, which is applied).
+    proved : bool or None
+        True when the claim is proven, False when its negation is proven, None otherwise.
+    claim : str
+        The statement the label refers to.
+    reason : str
+        How it was decided, or why it was not.
+    details : dict
+        Numbers: margins of the verified constraints, proofs per horizon (boxes, seconds),
+        the optimality bracket when requested.
+    counterexample : ndarray or None
+        A point that disproves the claim, when one was found.
+    """
+
+    label: str
+    proved: bool | None
+    claim: str
+    reason: str
+    details: dict = field(default_factory=dict)
+    counterexample: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        return f"Certificate({self.label!r}, proved={self.proved}, reason={self.reason!r})"
