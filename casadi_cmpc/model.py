@@ -529,6 +529,25 @@ class Model:
         raise ModelError(f"no equilibrium of '{self.name}' found from x0 = {list(xx)} with "
                          f"u = {list(uu)} (Newton's method did not converge to {tol:g})")
 
+    def check_equilibrium(self, x: Any, u: Any, w: Any = None, names: str = "x_eq, u_eq",
+                          rtol: float = 1e-9) -> None:
+        """Raise ValueError unless ``f(x, u, w) = x`` (residual <= rtol (1 + |x|_inf)).
+
+        ``names`` labels the pair in the message, e.g. ``"x_ref, u_ref"``; ``w`` defaults to
+        the centre of W.
+        """
+        xe = np.asarray(x, dtype=float).reshape(self.n)
+        ww = (self.W.mid if w is None else w) if self.l else None
+        nxt = self.step(xe, u, ww)
+        res = float(np.abs(nxt - xe).max())
+        if not res <= rtol * (1.0 + float(np.abs(xe).max())):
+            a, b = (s.strip() for s in names.split(","))
+            raise ValueError(
+                f"({names}) = ({xe.tolist()}, {np.asarray(u, dtype=float).tolist()}) is not "
+                f"an equilibrium of '{self.name}': f({a}, {b}) - {a} = "
+                f"{(nxt - xe).tolist()} (largest residual {res:.3g}); pass an equilibrium, "
+                f"e.g. {a} = model.equilibrium({b}, x0=guess)")
+
     def summary(self) -> str:
         """A short multi-line description: sizes, boxes, detected structure."""
         lines = [

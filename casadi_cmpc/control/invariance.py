@@ -24,16 +24,6 @@ from ..solvers.result import Certificate
 __all__ = ["certify_invariant", "local_lqr"]
 
 
-def _equilibrium_check(model: Model, x: np.ndarray, u: np.ndarray, w: np.ndarray) -> None:
-    nxt = model.step(x, u, w if model.l else None)
-    res = float(np.abs(nxt - x).max())
-    if not res <= 1e-9 * (1.0 + float(np.abs(x).max())):
-        raise ValueError(
-            f"(x_eq, u_eq) = ({x.tolist()}, {u.tolist()}) is not an equilibrium of "
-            f"'{model.name}': f(x_eq, u_eq) - x_eq = {(nxt - x).tolist()} (largest residual "
-            f"{res:.3g}); use x_eq = model.equilibrium(u_eq, x0=guess)")
-
-
 def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
               w: Any = None) -> np.ndarray:
     """LQR gain ``K`` (u = u_eq + K (x - x_eq)) of the linearisation at an equilibrium.
@@ -74,7 +64,7 @@ def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
     we = _vector(w, model.l, "w", model.W.mid) if model.l else np.zeros(0)
     Qm = _weight(Q, n, "Q", definite=False, default=None)
     Rm = _weight(R, m, "R", definite=True, default=None)
-    _equilibrium_check(model, xe, ue, we)
+    model.check_equilibrium(xe, ue, we if model.l else None)
     A = np.asarray(model.jacobian_function("x")(xe, ue, we), dtype=float)
     B = np.asarray(model.jacobian_function("u")(xe, ue, we), dtype=float)
     try:

@@ -641,14 +641,7 @@ class ContractiveMPC:
             raise ValueError(f"x_ref {xr.tolist()} lies outside X = {model.X!r}")
         if not model.U.contains(ur[None, :])[0]:
             raise ValueError(f"u_ref {ur.tolist()} lies outside U = {model.U!r}")
-        nxt = model.step(xr, ur, self.w_nominal if model.l else None)
-        res = float(np.abs(nxt - xr).max())
-        if not res <= 1e-9 * (1.0 + float(np.abs(xr).max())):
-            raise ValueError(
-                f"(x_ref, u_ref) = ({xr.tolist()}, {ur.tolist()}) is not an equilibrium of "
-                f"'{model.name}': f(x_ref, u_ref) - x_ref = {(nxt - xr).tolist()} (largest "
-                f"residual {res:.3g}); pass an equilibrium, e.g. x_ref = "
-                "model.equilibrium(u_ref, x0=guess)")
+        model.check_equilibrium(xr, ur, self.w_nominal if model.l else None, "x_ref, u_ref")
 
     def _path_functions(self, g: Any) -> tuple[ca.Function | None, ca.Function | None]:
         if g is None:
