@@ -26,6 +26,7 @@ True
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from typing import Any
 
@@ -482,6 +483,134 @@ def _covered(Q: np.ndarray, U: np.ndarray) -> np.ndarray:
     return res
 
 
+class _BoxGrid:
+    """Exact index of a union of closed boxes on the grid of their own bounds.
+
+    The sorted distinct bounds of the boxes, per coordinate, cut space into cells; each cell
+    is either inside one of the boxes or has no interior point in common with any. A count
+    table (n-D prefix sums of the covered cells) answers, for a query box, how many cells of
+    an index range are covered, in ``2**n`` look-ups. The ranges come from exact
+    comparisons with the bounds (``searchsorted``), so both tests below are exact:
+
+    * ``contains``: the cells covering the query (the last bound ``<= lo`` to the first
+      bound ``>= hi``) are all covered;
+    * ``intersects``: some cell meeting the closed query (a shared face counts) is covered.
+
+    Boxes of zero width in some coordinate (flat) cover no cell: they are kept aside and
+    the tests use the exact pairwise routines for them (``intersects``) or for flat queries
+    (``contains``: a query with interior is inside the closed union of the boxes with
+    interior iff it is inside the union of all, since flat boxes have no volume).
+    Built only when the table is small (:data:`MAX_CELLS`); otherwise ``None``.
+    """
+
+    MAX_CELLS = 4_000_000
+
+    @classmethod
+    def build(cls, U: np.ndarray) -> _BoxGrid | None:
+        if U.shape[0] == 0 or not np.isfinite(U).all():
+            return None
+        n = U.shape[1]
+        flat = (U[..., 1] <= U[..., 0]).any(axis=1)
+        if flat.all():
+            return None
+        full = U
+        U = U[~flat]
+        edges = [np.unique(U[:, j, :]) for j in range(n)]
+        shape = tuple(max(e.size - 1, 1) for e in edges)
+        if int(np.prod([s + 1 for s in shape], dtype=float)) > cls.MAX_CELLS:
+            return None
+        self = cls()
+        self.all = full
+        self.flat = full[flat]
+        self.edges = edges
+        self.shape = shape
+        # difference array over the cells: +-1 at the 2**n corners of each box's index block
+        a = [np.searchsorted(edges[j], U[:, j, 0]) for j in range(n)]  # first cell
+        b = [np.searchsorted(edges[j], U[:, j, 1]) for j in range(n)]  # one past the last
+        keep = np.ones(U.shape[0], dtype=bool)
+        for j in range(n):
+            keep &= b[j] > a[j]  # flat boxes cover no cell
+        diff = np.zeros(tuple(s + 1 for s in shape), dtype=np.int64)
+        for bits in itertools.product((0, 1), repeat=n):
+            idx = tuple((b[j] if bit else a[j])[keep] for j, bit in enumerate(bits))
+            np.add.at(diff, idx, (-1) ** sum(bits))
+        cover = diff
+        for j in range(n):
+            cover = np.cumsum(cover, axis=j)
+        covered = (cover[tuple(slice(0, s) for s in shape)] > 0).astype(np.int64)
+        table = np.zeros(tuple(s + 1 for s in shape), dtype=np.int64)
+        inner = covered
+        for j in range(n):
+            inner = np.cumsum(inner, axis=j)
+        table[tuple(slice(1, None) for _ in shape)] = inner
+        self.table = table
+        return self
+
+    def _count(self, i0: list[np.ndarray], i1: list[np.ndarray]) -> np.ndarray:
+        """Covered cells in the index blocks ``i0[j] <= i < i1[j]`` (empty blocks give 0)."""
+        n = len(i0)
+        tot = np.zeros(i0[0].shape[0], dtype=np.int64)
+        for bits in itertools.product((0, 1), repeat=n):
+            idx = tuple(i1[j] if bit else i0[j] for j, bit in enumerate(bits))
+            tot += (-1) ** (n - sum(bits)) * self.table[idx]
+        return tot
+
+    def contains(self, Q: np.ndarray) -> np.ndarray:
+        thin = (Q[..., 1] <= Q[..., 0]).any(axis=1)
+        if thin.any():
+            out = np.zeros(Q.shape[0], dtype=bool)
+            out[thin] = _covered(Q[thin], self.all)
+            if (~thin).any():
+                out[~thin] = self.contains(Q[~thin])
+            return out
+        n = Q.shape[1]
+        ok = np.isfinite(Q).all(axis=(1, 2))
+        i0, i1, vol = [], [], np.ones(Q.shape[0], dtype=np.int64)
+        for j in range(n):
+            e = self.edges[j]
+            lo, hi = Q[:, j, 0], Q[:, j, 1]
+            if e.size == 1:  # every box flat in j: only cells of no extent
+                ok &= False
+                i0.append(np.zeros(Q.shape[0], dtype=np.intp))
+                i1.append(np.zeros(Q.shape[0], dtype=np.intp))
+                continue
+            ok &= (lo >= e[0]) & (hi <= e[-1])
+            a = np.searchsorted(e, lo, side="right") - 1  # e[a] <= lo
+            b = np.searchsorted(e, hi, side="left")  # e[b] >= hi
+            a = np.clip(a, 0, e.size - 2)
+            b = np.clip(b, a + 1, e.size - 1)
+            i0.append(a)
+            i1.append(b)
+            vol *= b - a
+        return ok & (self._count(i0, i1) == vol)
+
+    def intersects(self, Q: np.ndarray) -> np.ndarray:
+        n = Q.shape[1]
+        fin = np.isfinite(Q).all(axis=(1, 2))
+        meet = np.ones(Q.shape[0], dtype=bool)
+        i0, i1 = [], []
+        for j in range(n):
+            e = self.edges[j]
+            lo, hi = Q[:, j, 0], Q[:, j, 1]
+            meet &= (hi >= e[0]) & (lo <= e[-1])
+            if e.size == 1:
+                i0.append(np.zeros(Q.shape[0], dtype=np.intp))
+                i1.append(np.ones(Q.shape[0], dtype=np.intp))
+                continue
+            # cells [e[i], e[i+1]] with e[i+1] >= lo and e[i] <= hi
+            a = np.searchsorted(e, lo, side="left") - 1
+            b = np.searchsorted(e, hi, side="right")
+            a = np.clip(a, 0, e.size - 2)
+            b = np.clip(b, a + 1, e.size - 1)
+            i0.append(a)
+            i1.append(b)
+        got = meet & (self._count(i0, i1) > 0)
+        if self.flat.shape[0]:
+            ia, _ = _pairs(Q, self.flat)
+            got[ia] = True
+        return np.where(fin, got, True)
+
+
 def _union_volume(U: np.ndarray) -> float:
     """Exact volume of a union of boxes (overlaps counted once).
 
@@ -792,7 +921,20 @@ class Paving(SetBase):
         nothing or a part outside every box is left. The test is exact on closed boxes.
         """
         q = as_boxes(boxes, self._n, "boxes")
+        grid = self._grid(view, q.shape[0])
+        if grid is not None:
+            return grid.contains(q)
         return _covered(q, self.view_boxes(view))
+
+    def _grid(self, view: str, n_queries: int) -> _BoxGrid | None:
+        """The exact grid index of a view (built once, for unions of 64 boxes or more)."""
+        U = self.view_boxes(view)
+        if U.shape[0] < 64 or n_queries < 8:
+            return None
+        key = ("grid", str(view).lower())
+        if key not in self._cache:
+            self._cache[key] = _BoxGrid.build(U)
+        return self._cache[key]
 
     def intersects_box(self, boxes: Any, view: str = "outer") -> np.ndarray:
         """Exact test ``box ∩ union ≠ ∅`` (closed boxes: a shared face counts).
@@ -807,6 +949,9 @@ class Paving(SetBase):
         ndarray of bool, shape (N,)
         """
         q = as_boxes(boxes, self._n, "boxes")
+        grid = self._grid(view, q.shape[0])
+        if grid is not None:
+            return grid.intersects(q)
         res = np.zeros(q.shape[0], dtype=bool)
         ia, _ = _pairs(q, self.view_boxes(view))
         res[ia] = True

@@ -8,6 +8,11 @@ undecided elements are bisected together. Each solver is a *classifier* plugged 
 the property; kept), ``OUTER`` (-1, proven not to have it; discarded) or ``UNDECIDED`` (0).
 Undecided elements narrower than ``eps`` become *boundary*; the others are bisected.
 
+A frontier whose elements are grouped (:class:`PairFrontier`: (state box, control cell)
+pairs, a state box being the group) has a ``reduce(labels, eps) -> (labels, small)`` hook
+that turns the labels of the elements into labels of the groups, marking the elements that
+are finished without a record ``DROPPED`` (2).
+
 The frontier is a plain array structure and every classification is a pure function of it,
 so a level can be split across processes without touching the algorithms. Limits (``eps``,
 ``max_boxes``, ``time_limit``) and Ctrl-C stop the loop and return the partial result, which
@@ -28,12 +33,13 @@ import numpy as np
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
 
-__all__ = ["INNER", "OUTER", "UNDECIDED", "Status", "BoxFrontier", "BnBOutcome",
-           "branch_and_bound"]
+__all__ = ["INNER", "OUTER", "UNDECIDED", "DROPPED", "Status", "BoxFrontier", "PairFrontier",
+           "BnBOutcome", "branch_and_bound"]
 
 INNER = np.int8(1)
 OUTER = np.int8(-1)
 UNDECIDED = np.int8(0)
+DROPPED = np.int8(2)  # finished without a record (grouped frontiers, see PairFrontier)
 
 
 class Status(enum.IntEnum):
@@ -306,6 +312,10 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
                 break
             labels = np.asarray(classify(frontier), dtype=np.int8)
+            reduce = getattr(frontier, "reduce", None)
+            small = None
+            if reduce is not None:  # grouped elements: labels and sizes of the groups
+                labels, small = reduce(labels, eps)
             # finished elements need no per-element data: a frontier may drop it there
             take_done = getattr(frontier, "take_done", frontier.take)
             n = len(frontier)
@@ -316,8 +326,11 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             i_in = (labels == INNER).nonzero()[0]
             i_out = (labels == OUTER).nonzero()[0]
             undecided = (labels != INNER) & (labels != OUTER)
-            # widths of every element (cheaper than gathering the undecided ones first)
-            small = frontier.width() <= eps
+            if reduce is not None:
+                undecided &= labels != DROPPED
+            if small is None:
+                # widths of every element (cheaper than gathering the undecided ones first)
+                small = frontier.width() <= eps
             i_small = (undecided & small).nonzero()[0]
             i_grow = (undecided & ~small).nonzero()[0]
             in_part = take_done(i_in) if i_in.size else None
@@ -363,3 +376,300 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
         outer=cat(outer) if outer else empty,
         n_discarded=n_discarded, status=status, message=message, levels=level,
         n_classified=n_classified, elapsed=time.perf_counter() - t0, history=history)
+
+
+def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
+    """Per group, the lowest element index with ``mask`` (``len(mask)`` where none), (G,)."""
+    N = group.shape[0]
+    first = np.full(G, N, dtype=np.intp)
+    idx = np.flatnonzero(mask)
+    np.minimum.at(first, group[idx], idx)
+    return first
+
+
+@dataclass
+class PairFrontier:
+    """(state box, control cell) pairs of a nested existential search, grouped by state box.
+
+    The element ``k`` is the joint box ``[lo[k], hi[k]]`` of shape ``(n + m,)``: a state box
+    (the first ``n`` components) and a cell of the control box (the last ``m``). Pairs with
+    the same ``group`` share their state box; the cells of a group, together with the cells
+    already proven useless for that box (or for a box containing it), cover the control box.
+    This is the frontier of thesis Alg 4.6 and Alg 6.1, with the two nested loops run
+    breadth-first, batched over all pairs.
+
+    A classifier labels **pairs**: ``INNER`` (the pair proves its state box: some control of
+    the cell works for every state of the box; it writes the proving control into
+    ``data``), ``OUTER`` (the cell is proven useless for the box) or ``UNDECIDED``.
+    :meth:`reduce` turns them into labels of the **groups**:
+
+    * a group is inner when one of its pairs is (one representative pair is kept, with its
+      data: the proving control);
+    * a group is outside when all its pairs are outer (its cells cover every control not
+      proven useless before, so no control works);
+    * an undecided group whose state box is at most ``eps`` wide (relative to ``x_scale``)
+      and whose cells cannot be split (narrower than ``u_eps`` relative to ``u_scale``, or
+      ``max_cells`` reached) is boundary (one representative);
+    * every other pair of a finished group, and every useless cell of a live group, is
+      ``DROPPED``.
+
+    :meth:`split` bisects, per group, the control cells while one of them can be split
+    (widest component relative to ``u_scale``: a per-dimension split mask), and otherwise
+    the state box (widest component relative to ``x_scale``); both halves of a state box
+    inherit the hull of the surviving cells of their group (one cell each).
+
+    Attributes
+    ----------
+    lo, hi : ndarray (N, n + m)
+    group : ndarray (N,) of int
+    n : int
+        Number of state components.
+    x_scale, u_scale : ndarray (n,), (m,)
+        Widths against which state and control widths are measured.
+    u_eps : float
+        Cells narrower than this (relative) are not split.
+    max_cells : int
+        Largest number of cells per state box.
+    data : dict of ndarray, optional
+        Per-pair arrays (first axis N) kept by :meth:`take_done`, so proven pairs keep what
+        the classifier wrote (e.g. ``"witness"``, the proving control, ``(N, m)``).
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    group: np.ndarray
+    n: int
+    x_scale: np.ndarray
+    u_scale: np.ndarray
+    u_eps: float = 0.05
+    max_cells: int = 64
+    split_ratio: float = 0.5
+    data: dict[str, np.ndarray] | None = None
+    _u_mode: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def from_boxes(cls, X: np.ndarray, U: np.ndarray, *, x_scale: np.ndarray | None = None,
+                   u_eps: float = 0.05, max_cells: int = 64,
+                   data: dict[str, np.ndarray] | None = None) -> PairFrontier:
+        """One pair per state box ``X`` (N, n, 2), each with the whole control box ``U``
+        (m, 2); ``data`` arrays (first axis N) are attached."""
+        X = np.asarray(X, dtype=float)
+        U = np.asarray(U, dtype=float).reshape(-1, 2)
+        N, n = X.shape[0], X.shape[1]
+        m = U.shape[0]
+        lo = np.concatenate([X[..., 0], np.broadcast_to(U[:, 0], (N, m))], axis=1)
+        hi = np.concatenate([X[..., 1], np.broadcast_to(U[:, 1], (N, m))], axis=1)
+        du = U[:, 1] - U[:, 0]
+        u_scale = np.where(du > 0, du, 1.0)
+        if x_scale is None:
+            x_scale = np.ones(n)
+        return cls(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
+                   np.arange(N, dtype=np.intp), n, np.asarray(x_scale, dtype=float), u_scale,
+                   float(u_eps), int(max_cells), data=data)
+
+    def __len__(self) -> int:
+        return self.lo.shape[0]
+
+    @property
+    def m(self) -> int:
+        return self.lo.shape[1] - self.n
+
+    @property
+    def x_boxes(self) -> np.ndarray:
+        """State boxes, (N, n, 2)."""
+        return np.stack([self.lo[:, : self.n], self.hi[:, : self.n]], axis=-1)
+
+    @property
+    def u_cells(self) -> np.ndarray:
+        """Control cells, (N, m, 2)."""
+        return np.stack([self.lo[:, self.n:], self.hi[:, self.n:]], axis=-1)
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """Joint boxes, (N, n + m, 2)."""
+        return np.stack([self.lo, self.hi], axis=-1)
+
+    def _with(self, lo: np.ndarray, hi: np.ndarray, group: np.ndarray,
+              data: dict[str, np.ndarray] | None, u_mode: np.ndarray | None = None
+              ) -> PairFrontier:
+        return PairFrontier(lo, hi, group, self.n, self.x_scale, self.u_scale, self.u_eps,
+                            self.max_cells, self.split_ratio, data, u_mode)
+
+    def take(self, mask: np.ndarray) -> PairFrontier:
+        idx = np.asarray(mask)
+        if idx.dtype == bool:
+            idx = np.flatnonzero(idx)
+        data = None if self.data is None else {
+            k: v.take(idx, axis=0) for k, v in self.data.items()}
+        mode = None if self._u_mode is None else self._u_mode.take(idx)
+        return self._with(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0),
+                          self.group.take(idx), data, mode)
+
+    take_done = take  # proven pairs keep their data (the proving control)
+
+    def _x_widths(self) -> np.ndarray:
+        with np.errstate(over="ignore"):
+            return (self.hi[:, : self.n] - self.lo[:, : self.n]) / self.x_scale
+
+    def _u_widths(self) -> np.ndarray:
+        with np.errstate(over="ignore"):
+            return (self.hi[:, self.n:] - self.lo[:, self.n:]) / self.u_scale
+
+    def width(self) -> np.ndarray:
+        """Largest relative width of each state box, (N,)."""
+        return _widest(self._x_widths())[0]
+
+    def _u_splittable(self) -> np.ndarray:
+        if self.m == 0:
+            return np.zeros(len(self), dtype=bool)
+        return _widest(self._u_widths())[0] > self.u_eps
+
+    def reduce(self, labels: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+        """Group labels from pair labels (see the class notes): ``(labels, small)``."""
+        N = len(self)
+        out = np.full(N, DROPPED, dtype=np.int8)
+        small = np.zeros(N, dtype=bool)
+        if N == 0:
+            return out, small
+        g = self.group
+        G = int(g.max()) + 1
+        inner = labels == INNER
+        outer = labels == OUTER
+        cnt = np.bincount(g, minlength=G)
+        g_in = np.bincount(g, weights=inner, minlength=G) > 0
+        g_out = (np.bincount(g, weights=outer, minlength=G) == cnt) & ~g_in
+        rep_in = _group_first(g, inner, G)[g_in]
+        out[rep_in] = INNER
+        out[_group_first(g, np.ones(N, dtype=bool), G)[g_out]] = OUTER
+        live = ~(g_in | g_out)
+        und = live[g] & ~outer & ~inner
+        out[und] = UNDECIDED
+        # groups that can neither split a cell nor their state box are boundary
+        split_u = und & self._u_splittable()
+        n_live = np.bincount(g, weights=und, minlength=G)
+        n_split = np.bincount(g, weights=split_u, minlength=G)
+        u_ok = (n_split > 0) & (n_live + n_split <= self.max_cells)
+        x_small = np.zeros(G, dtype=bool)
+        x_small[g] = self.width() <= eps
+        exhausted = live & ~u_ok & x_small
+        rep = _group_first(g, und, G)[exhausted]
+        small[rep] = True
+        out[und & exhausted[g]] = DROPPED
+        out[rep] = UNDECIDED
+        self._u_mode = u_ok[g]
+        return out, small
+
+    def split(self) -> tuple[PairFrontier, PairFrontier]:
+        """``(children, stuck)``: cells bisected in groups that can still split a cell, state
+        boxes bisected in the others (see the class notes); ``stuck``: state boxes that
+        cannot be split in floating point (one pair per group)."""
+        N, n = len(self), self.n
+        mode = self._u_mode
+        if mode is None:
+            mode = np.zeros(N, dtype=bool)
+            mode_g = np.zeros(int(self.group.max()) + 1 if N else 0, dtype=bool)
+            mode_g[self.group[self._u_splittable()]] = True
+            mode = mode_g[self.group] if N else mode
+        parts: list[PairFrontier] = []
+        # --- groups splitting their cells ---------------------------------------------
+        iu = np.flatnonzero(mode)
+        if iu.size:
+            P = self.take(iu)
+            can = P._u_splittable()
+            keep = P.take(~can)
+            S = P.take(can)
+            if len(S):
+                wu, k = _widest(S._u_widths())
+                k = k + n
+                rows = np.arange(len(S))
+                a, b = S.lo[rows, k], S.hi[rows, k]
+                c = 0.5 * a + 0.5 * b
+                ok = (a < c) & (c < b)
+                keep = PairFrontier._join([keep, S.take(~ok)]) if not ok.all() else keep
+                S, k, c = S.take(ok), k[ok], c[ok]
+                rows = np.arange(len(S))
+                lo2 = np.concatenate([S.lo, S.lo])
+                hi2 = np.concatenate([S.hi, S.hi])
+                hi2[rows, k] = c
+                lo2[rows + len(S), k] = c
+                data = None if S.data is None else {
+                    key: np.concatenate([v, v]) for key, v in S.data.items()}
+                parts.append(self._with(lo2, hi2, np.concatenate([S.group, S.group]), data))
+            if len(keep):
+                parts.append(keep)
+        # --- groups splitting their state box -----------------------------------------
+        ix = np.flatnonzero(~mode)
+        stuck = self.take(ix[:0])
+        if ix.size:
+            P = self.take(ix)
+            ug, inv = np.unique(P.group, return_inverse=True)
+            G = ug.size
+            lo = np.full((G, P.lo.shape[1]), np.inf)
+            hi = np.full((G, P.lo.shape[1]), -np.inf)
+            np.minimum.at(lo, inv, P.lo)
+            np.maximum.at(hi, inv, P.hi)
+            first = _group_first(inv, np.ones(len(P), dtype=bool), G)
+            data = None if P.data is None else {
+                key: v.take(first, axis=0) for key, v in P.data.items()}
+            H = self._with(lo, hi, ug, data)
+            wx, k = _widest(H._x_widths())
+            rows = np.arange(G)
+            a, b = lo[rows, k], hi[rows, k]
+            r = self.split_ratio
+            c = 0.5 * a + 0.5 * b if r == 0.5 else a + r * (b - a)
+            ok = (a < c) & (c < b)
+            if not ok.all():
+                stuck = H.take(~ok)
+                H, k, c = H.take(ok), k[ok], c[ok]
+            G2 = len(H)
+            rows = np.arange(G2)
+            lo2 = np.concatenate([H.lo, H.lo])
+            hi2 = np.concatenate([H.hi, H.hi])
+            hi2[rows, k] = c
+            lo2[rows + G2, k] = c
+            data = None if H.data is None else {
+                key: np.concatenate([v, v]) for key, v in H.data.items()}
+            # fresh group ids, beyond those of the cell-splitting groups
+            base = int(self.group.max()) + 1
+            gid = base + np.arange(2 * G2, dtype=np.intp)
+            parts.append(self._with(lo2, hi2, gid, data))
+        children = PairFrontier._join(parts) if parts else self.take(ix[:0])
+        # dense group ids keep the per-group arrays of reduce small
+        if len(children):
+            _, dense = np.unique(children.group, return_inverse=True)
+            children.group = dense.astype(np.intp)
+        return children, stuck
+
+    def bisect(self) -> PairFrontier:
+        children, stuck = self.split()
+        return PairFrontier.concat([children, stuck]) if len(stuck) else children
+
+    @staticmethod
+    def _join(parts: list[PairFrontier]) -> PairFrontier:
+        """Join parts of one frontier (group ids kept as they are)."""
+        data = None
+        keys = [None if p.data is None else set(p.data) for p in parts]
+        if keys[0] is not None and all(k == keys[0] for k in keys):
+            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
+        return parts[0]._with(np.concatenate([p.lo for p in parts]),
+                              np.concatenate([p.hi for p in parts]),
+                              np.concatenate([p.group for p in parts]), data)
+
+    @staticmethod
+    def concat(parts: list[PairFrontier]) -> PairFrontier:
+        """Join frontiers; group ids are offset so that groups of different parts stay
+        distinct."""
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        groups, off = [], 0
+        for p in parts:
+            groups.append(p.group + off)
+            if len(p):
+                off += int(p.group.max()) + 1
+        data = None
+        keys = [None if p.data is None else set(p.data) for p in parts]
+        if keys[0] is not None and all(k == keys[0] for k in keys):
+            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
+        return parts[0]._with(np.concatenate([p.lo for p in parts]),
+                              np.concatenate([p.hi for p in parts]),
+                              np.concatenate(groups), data)

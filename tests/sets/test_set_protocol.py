@@ -31,8 +31,13 @@ def _zonotope():
     return cm.Zonotope([0.1, -0.2], [[0.6, 0.3, -0.2], [0.1, 0.5, 0.4]])
 
 
+def _setunion():
+    inner = np.array([[[0.5, 1.5], [0.5, 1.0]], [[-1.5, -1.0], [-1.0, 1.0]]])
+    return cm.SetUnion([_polytope(), cm.Paving(inner=inner), _zonotope()])
+
+
 FACTORIES = {"Box": _box, "Paving": _paving, "Polytope": _polytope,
-             "PolytopeUnion": _union, "Zonotope": _zonotope}
+             "PolytopeUnion": _union, "Zonotope": _zonotope, "SetUnion": _setunion}
 
 
 @pytest.fixture(params=sorted(FACTORIES))
