@@ -104,40 +104,165 @@ class SetSequence:
     Attributes
     ----------
     sets : list
-        ``sets[i]`` is K_i (``sets[0]`` is the target).
+        ``sets[i]`` is K_i (``sets[0]`` is the target); also ``seq[i]``.
     converged_at : int or None
         The first i with K_i = K_{i-1} (the maximal controllable set reached), else None.
+    status : str
+        ``"converged"``, ``"max_steps"`` (the recursion stopped at ``max_steps``),
+        ``"until"`` (the given states were reached), ``"budget"`` (a step ran out of budget:
+        its set is still a proven inner approximation) or ``"interrupted"``.
+    steps : list of dict
+        Per step i >= 1 (``steps[i - 1]``), for sequences computed by set inversion:
+        ``"boxes"`` (N_i, n, 2) the state boxes first proven at step i, ``"witness"``
+        (N_i, m) a proving control per box, ``"polytope"`` (polytopic sequences), and
+        ``"seconds"``.
+    info : dict
+        How the sequence was computed (model, eps, robust, semantics, certificate of T).
     """
 
     sets: list = field(default_factory=list)
     converged_at: int | None = None
     info: dict = field(default_factory=dict)
+    status: str = "max_steps"
+    steps: list = field(default_factory=list)
 
-    def level(self, x: Any) -> int | None:
-        """Smallest i with x in K_i, or None when x lies in no set of the sequence."""
+    # ------------------------------------------------------------------ queries
+    def level(self, x: Any) -> Any:
+        """Smallest i with x in K_i, or None when x lies in no set of the sequence.
+
+        For a batch ``(P, n)`` of points, an int array ``(P,)`` with -1 outside every set.
+        """
+        p = np.asarray(x, dtype=float)
+        batched = p.ndim == 2
+        P = np.atleast_2d(p)
+        out = np.full(P.shape[0], -1, dtype=int)
         for i, S in enumerate(self.sets):
-            if S.contains(x):
-                return i
+            und = np.flatnonzero(out < 0)
+            if und.size == 0:
+                break
+            hit = np.atleast_1d(np.asarray(S.contains(P[und]), dtype=bool))
+            out[und[hit]] = i
+        if batched:
+            return out
+        return None if out[0] < 0 else int(out[0])
+
+    def witness(self, x: Any) -> tuple[int, np.ndarray] | None:
+        """``(i, u)``: a stored proving control of a box first proven at step i that holds
+        ``x`` (smallest i), or None (x in T or in no box, or no controls stored)."""
+        p = np.asarray(x, dtype=float).reshape(-1)
+        for i, st in enumerate(self.steps, start=1):
+            B = st.get("boxes")
+            if B is None or B.shape[0] == 0:
+                continue
+            hit = np.flatnonzero(((B[..., 0] <= p) & (p <= B[..., 1])).all(axis=1))
+            if hit.size:
+                return i, np.asarray(st["witness"][hit[0]], dtype=float).copy()
         return None
 
     def __len__(self) -> int:
         return len(self.sets)
 
-    def plot(self, ax: Any = None, cmap: str = "viridis", **kw: Any) -> Any:
-        """Draw the sets from the largest (back) to the target (front)."""
+    def __getitem__(self, i: int) -> Any:
+        return self.sets[i]
+
+    def __iter__(self):
+        return iter(self.sets)
+
+    def __repr__(self) -> str:
+        conv = "" if self.converged_at is None else f", converged_at={self.converged_at}"
+        return f"SetSequence(len={len(self.sets)}, status={self.status!r}{conv})"
+
+    # ------------------------------------------------------------------ drawing
+    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), cmap: str = "viridis",
+             colorbar: bool = True, **kw: Any) -> Any:
+        """Draw the sets from the largest (back) to the target (front), coloured by step,
+        with a colour bar as the key (step i = K_i)."""
+        import matplotlib as mpl
         import matplotlib.pyplot as plt
 
-        from ..plot import new_axes
+        from ..plot import new_axes, plot_boxes
 
         ax = new_axes(ax)
-        colors = plt.get_cmap(cmap)(np.linspace(0.1, 0.9, max(len(self.sets), 2)))
+        k = max(len(self.sets), 2)
+        cm_ = plt.get_cmap(cmap)
+        norm = mpl.colors.Normalize(vmin=0, vmax=k - 1)
+        alpha = kw.pop("alpha", 0.8)
+        edge = kw.pop("edgecolor", "none" if self.steps else "k")
         for i in range(len(self.sets) - 1, -1, -1):
-            S = self.sets[i]
-            members = S.polytopes if isinstance(S, PolytopeUnion) else [S]
+            col = cm_(norm(i))
+            st = self.steps[i - 1] if 1 <= i <= len(self.steps) else None
+            if st is not None and st.get("polytope") is None and "boxes" in st:
+                if st["boxes"].shape[0]:
+                    plot_boxes(st["boxes"], ax=ax, dims=dims, facecolor=col, alpha=alpha,
+                               edgecolor=edge, **kw)
+                continue
+            S = self.sets[i] if st is None or st.get("polytope") is None else st["polytope"]
+            members = S.polytopes if isinstance(S, PolytopeUnion) else (
+                S.members if hasattr(S, "members") else [S])
             for P in members:
-                P.plot(ax=ax, facecolor=colors[i], alpha=kw.get("alpha", 0.6),
-                       edgecolor=kw.get("edgecolor", "k"))
+                if isinstance(P, Polytope) and not P.is_empty():
+                    P.plot(ax=ax, dims=dims, facecolor=col, alpha=alpha,
+                           edgecolor="k", **kw)
+        if colorbar:
+            sm = mpl.cm.ScalarMappable(norm=norm, cmap=cm_)
+            ax.figure.colorbar(sm, ax=ax, label="step i (set K_i)")
+        names = self.info.get("state_names")
+        ax.set_xlabel(names[dims[0]] if names else f"x{dims[0] + 1}")
+        ax.set_ylabel(names[dims[1]] if names else f"x{dims[1] + 1}")
         return ax
+
+    # -------------------------------------------------------------- persistence
+    def save(self, path: Any) -> Any:
+        """Save the sequence exactly (sets, steps, status) to ``.npz`` or ``.json``."""
+        from pathlib import Path
+
+        from ..sets.base import _save_state
+
+        state = {
+            "sets": [{"type": S._type_name, "state": S._state()} for S in self.sets],
+            "converged_at": -1 if self.converged_at is None else int(self.converged_at),
+            "status": self.status,
+            "steps": [{k: ({"type": v._type_name, "state": v._state()}
+                           if hasattr(v, "_state") else v)
+                       for k, v in st.items() if v is not None} for st in self.steps],
+            "info": {k: v for k, v in self.info.items()
+                     if isinstance(v, (str, int, float, bool, list, np.ndarray))},
+        }
+        return _save_state("SetSequence", state, Path(path))
+
+    @classmethod
+    def load(cls, path: Any) -> SetSequence:
+        """Load a sequence written by :meth:`save`."""
+        from ..sets.base import load_set
+
+        obj = load_set(path)
+        if not isinstance(obj, SetSequence):
+            raise TypeError(f"{path} holds a {type(obj).__name__}, not a SetSequence")
+        return obj
+
+    @classmethod
+    def _from_state(cls, state: dict[str, Any]) -> SetSequence:
+        from ..sets.base import _TYPES
+
+        def build(d: Any) -> Any:
+            if isinstance(d, dict) and set(d) == {"type", "state"}:
+                return _TYPES[d["type"]]._from_state(d["state"])
+            return d
+
+        sets = [build(d) for d in state["sets"]]
+        steps = [{k: build(v) for k, v in st.items()} for st in state["steps"]]
+        conv = int(state["converged_at"])
+        return cls(sets=sets, converged_at=None if conv < 0 else conv,
+                   info=dict(state.get("info", {})), status=str(state["status"]), steps=steps)
+
+
+def _register() -> None:
+    from ..sets.base import _TYPES
+
+    _TYPES["SetSequence"] = SetSequence  # type: ignore[assignment]
+
+
+_register()
 
 
 def _same_set(S1: Any, S2: Any) -> bool:
@@ -178,7 +303,9 @@ def linear_controllable_sets(model: Model, target: Any, max_steps: int = 50,
         seq.sets.append(K)
         if _same_set(K, seq.sets[-2]):
             seq.converged_at = i
+            seq.status = "converged"
             break
         if pts is not None and np.all(K.contains(pts)):
+            seq.status = "until"
             break
     return seq

@@ -1,6 +1,7 @@
 """Contractive MPC controllers and closed-loop simulation."""
 
 from .contractive import ContractiveMPC, MPCResult
+from .sequence import SetSequenceMPC
 from .simulate import Trajectory, simulate
 
-__all__ = ["ContractiveMPC", "MPCResult", "Trajectory", "simulate"]
+__all__ = ["ContractiveMPC", "MPCResult", "SetSequenceMPC", "Trajectory", "simulate"]

@@ -1,0 +1,675 @@
+"""One-step and controllable sets of nonlinear models (thesis Alg 4.6, 5.2, 6.1; (6.8)).
+
+:func:`one_step_set` computes an inner approximation of
+
+    K(X, T) = {x in X : exists u in U such that f(x, u, w) in T for all w in W}
+
+(``robust=True``; the control is chosen before the disturbance is known) as a union of
+boxes, each with a proving control. It is one nested (state box × control cell) search on
+the batched branch-and-bound engine (:class:`~casadi_cmpc.solvers.engine.PairFrontier`).
+:func:`controllable_sets` iterates it, ``K_{i+1} = K(X, K_i)``, to convergence.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .._validate import as_boxes
+from ..exceptions import DimensionError, ModelError
+from ..interval.compiler import inclusion
+from ..model import Model
+from ..sets.box import Box
+from ..sets.paving import Paving
+from ..sets.polytope import Polytope, PolytopeUnion
+from ..sets.union import SetUnion
+from ..sets.zonotope import Zonotope
+from ..solvers._common import positive_eps
+from ..solvers.engine import INNER, OUTER, PairFrontier, Status, branch_and_bound
+from ..solvers.result import Result
+
+__all__ = ["one_step_set", "OneStepSet", "controllable_sets"]
+
+ROBUST = "exists u for all w"
+MODAL = "for all w exists u (u may depend on w)"
+NOMINAL = "exists u, w at its nominal value"
+
+
+# ----------------------------------------------------------------------------- targets
+def _flatten(target: Any) -> list[Any]:
+    if isinstance(target, (list, tuple)):
+        return [m for t in target for m in _flatten(t)]
+    if isinstance(target, SetUnion):
+        return [m for t in target.members for m in _flatten(t)]
+    if isinstance(target, PolytopeUnion):
+        return list(target.polytopes)
+    if isinstance(target, Box):
+        return [Polytope.from_box(target)]
+    if isinstance(target, (Polytope, Paving, Zonotope)):
+        return [target]
+    raise TypeError(f"the target must be a Polytope, PolytopeUnion, Paving (its inner boxes), "
+                    f"Zonotope, Box, SetUnion or a list of them; got {type(target).__name__}")
+
+
+class _Target:
+    """Proven tests of ``f(X, U, W) ⊆ T`` and ``f(X, U, W) ∩ T = ∅`` for batches of boxes.
+
+    Polytope members are tested through the rows composed with f, ``H f(x, u, w) <= h``,
+    enclosed by the centered form (H enters as a thin input, so no constant is folded);
+    box unions and zonotopes through the interval hull of the successor.
+    """
+
+    def __init__(self, model: Model, target: Any) -> None:
+        members = _flatten(target)
+        n = model.n
+        for S in members:
+            if S.dim != n:
+                raise DimensionError(f"the target has dimension {S.dim}; the model has n = {n}")
+        self.model = model
+        self.polys: list[tuple[Any, np.ndarray, np.ndarray]] = []
+        boxes = []
+        self.zonos: list[Zonotope] = []
+        for S in members:
+            if isinstance(S, Polytope):
+                if S.is_empty():
+                    continue
+                A, b = np.asarray(S.A, dtype=float), np.asarray(S.b, dtype=float)
+                H = ca.SX.sym("H", A.shape[0], n)
+                fun = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
+                                  [ca.mtimes(H, model.f)])
+                Hb = A.ravel(order="F")
+                self.polys.append((inclusion(fun, "centered"),
+                                   np.stack([Hb, Hb], axis=-1)[None], b))
+            elif isinstance(S, Paving):
+                if S.inner.shape[0]:
+                    boxes.append(S.inner)
+            else:
+                self.zonos.append(S)
+        self.boxes = Paving(inner=np.concatenate(boxes)) if boxes else None
+        self.F = inclusion(model.function, "centered") if (boxes or self.zonos) else None
+        self.empty = not (self.polys or boxes or self.zonos)
+
+    def _rows(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> list[np.ndarray]:
+        N = X.shape[0]
+        out = []
+        for F, Hb, _ in self.polys:
+            out.append(F.evaluate_unchecked([X, U, W, Hb], N)[0])
+        return out
+
+    def _hull(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
+        return self.F.evaluate_unchecked([X, U, W], X.shape[0])[0]
+
+    def inside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """Proven ``f(x, u, w) in T`` for all x, u, w of the boxes, (N,)."""
+        N = X.shape[0]
+        ok = np.zeros(N, dtype=bool)
+        if self.empty or N == 0:
+            return ok
+        for (_, _, b), R in zip(self.polys, self._rows(X, U, W), strict=True):
+            ok |= (R[..., 1] <= b).all(axis=1)
+        if self.F is not None:
+            und = np.flatnonzero(~ok)
+            if und.size:
+                Y = self._hull(X[und], U[und] if U.shape[0] > 1 else U,
+                               W[und] if W.shape[0] > 1 else W)
+                fin = np.isfinite(Y).all(axis=(1, 2))
+                got = np.zeros(und.size, dtype=bool)
+                if self.boxes is not None:
+                    got |= self.boxes.contains_box(Y, view="inner") & fin
+                for Z in self.zonos:
+                    got |= np.asarray(Z.contains_box(Y), dtype=bool) & fin
+                ok[und[got]] = True
+        return ok
+
+    def outside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """Proven ``f(x, u, w) not in T`` for all x, u, w of the boxes, (N,)."""
+        N = X.shape[0]
+        if self.empty:
+            return np.ones(N, dtype=bool)
+        out = np.ones(N, dtype=bool)
+        for (_, _, b), R in zip(self.polys, self._rows(X, U, W), strict=True):
+            out &= (R[..., 0] > b).any(axis=1)
+        if self.F is not None and out.any():
+            idx = np.flatnonzero(out)
+            Y = self._hull(X[idx], U[idx] if U.shape[0] > 1 else U,
+                           W[idx] if W.shape[0] > 1 else W)
+            meet = ~np.isfinite(Y).all(axis=(1, 2))
+            if self.boxes is not None:
+                meet |= self.boxes.intersects_box(np.nan_to_num(Y), view="inner")
+            for Z in self.zonos:
+                meet |= np.asarray(Z.intersects_box(np.nan_to_num(Y)), dtype=bool)
+            out[idx[meet]] = False
+        return out
+
+
+def _as_obstacles(obstacles: Any, n: int) -> list[Any]:
+    if obstacles is None:
+        return []
+    if isinstance(obstacles, (Box, Polytope, PolytopeUnion, Zonotope)):
+        obstacles = [obstacles]
+    out = []
+    for ob in obstacles:
+        if isinstance(ob, Box):
+            ob = Polytope.from_box(ob)
+        if not isinstance(ob, (Polytope, PolytopeUnion, Zonotope)):
+            raise TypeError(f"obstacles must be Boxes, Polytopes or Zonotopes; got "
+                            f"{type(ob).__name__}")
+        if ob.dim != n:
+            raise DimensionError(f"an obstacle has dimension {ob.dim}; the model has n = {n}")
+        out.append(ob)
+    return out
+
+
+class _OneStepClassifier:
+    """Pair classifier of thesis Alg 6.1 (Alg 4.6 without disturbance).
+
+    * cell useless (OUTER) when, for one of the points ``w_c`` of W,
+      ``f(X_i, U_j, w_c) ∩ T = ∅``: then every control of the cell fails for every state of
+      the box (with that w), so the cell cannot provide the ``exists u`` of ``exists u
+      for all w`` (the w may differ from cell to cell: the negation is ``for all u exists w``);
+    * pair INNER when ``f(X_i, mid(U_j), W) ⊆ T``: the control ``mid(U_j)`` works for every
+      state of the box and every w (it is stored as the witness);
+    * a box that may meet an obstacle is never inner; a box inside one is outside.
+    """
+
+    def __init__(self, target: _Target, W: np.ndarray, w_points: np.ndarray,
+                 obstacles: list[Any]) -> None:
+        self.target = target
+        self.W = W[None]  # (1, l, 2)
+        self.w_points = w_points  # (C, l)
+        self.obstacles = obstacles
+        self.n_pairs = 0
+
+    def __call__(self, fr: PairFrontier) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return self._classify(fr)
+
+    def _classify(self, fr: PairFrontier) -> np.ndarray:
+        N = len(fr)
+        self.n_pairs += N
+        labels = np.zeros(N, dtype=np.int8)
+        if N == 0:
+            return labels
+        X, C = fr.x_boxes, fr.u_cells
+        blocked = np.zeros(N, dtype=bool)
+        buried = np.zeros(N, dtype=bool)
+        for ob in self.obstacles:
+            blocked |= np.asarray(ob.intersects_box(X), dtype=bool)
+            buried |= np.asarray(ob.contains_box(X), dtype=bool)
+        useless = buried.copy()
+        for wc in self.w_points:
+            und = np.flatnonzero(~useless)
+            if und.size == 0:
+                break
+            Wc = np.stack([wc, wc], axis=-1)[None]
+            useless[und] = self.target.outside(X[und], C[und], Wc)
+        labels[useless] = OUTER
+        cand = np.flatnonzero(~useless & ~blocked)
+        if cand.size:
+            lo, hi = C[cand, :, 0], C[cand, :, 1]
+            mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+            ok = self.target.inside(X[cand], np.stack([mid, mid], axis=-1), self.W)
+            labels[cand[ok]] = INNER
+            fr.data["witness"][cand[ok]] = mid[ok]
+        return labels
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class OneStepSet(Result):
+    """Inner approximation of a one-step (robust) controllable set, with proving controls.
+
+    Attributes
+    ----------
+    paving : Paving
+        ``inner``: state boxes proven in the set; ``boundary``: undecided boxes;
+        ``outer``: boxes proven outside it (for drawing).
+    witness : ndarray (N_inner, m) or None
+        For the ``general`` method, a control proving each inner box: ``f(x, witness, w)``
+        lies in the target for every x of the box and every w of W (``None`` for the
+        modal method, whose proof gives no control).
+    semantics : str
+        ``"exists u for all w"`` (robust), ``"exists u, w at its nominal value"``
+        (``robust=False`` with a disturbance; w at the centre of W), or ``"for all w
+        exists u (u may depend on w)"`` (modal method: a weaker statement).
+    status : Status
+        PROVED when the search ran to completion (the boundary boxes are narrower than eps),
+        BUDGET when a limit stopped it.
+    """
+
+    paving: Paving
+    witness: np.ndarray | None = None
+    semantics: str = ROBUST
+    target: Any = None
+    n_pairs: int = 0
+
+    def _repr_parts(self) -> list[str]:
+        p = self.paving
+        return [f"inner={p.n_inner}", f"boundary={p.n_boundary}",
+                f"semantics={self.semantics!r}"]
+
+    @property
+    def inner(self) -> np.ndarray:
+        return self.paving.inner
+
+    @property
+    def boundary(self) -> np.ndarray:
+        return self.paving.boundary
+
+    def area(self, view: str = "inner") -> float:
+        """Area (volume) of the inner boxes (``view="outer"``: inner and boundary)."""
+        return self.paving.volume(view=view)
+
+    def contains(self, points: Any) -> np.ndarray | bool:
+        """Whether points lie in an inner box (proven members of the set)."""
+        return self.paving.contains(points, view="inner")
+
+    def control(self, x: Any) -> np.ndarray | None:
+        """The stored proving control of the first inner box containing ``x`` (n,), or None
+        when ``x`` lies in no inner box or the method stores no control."""
+        if self.witness is None:
+            return None
+        x = np.asarray(x, dtype=float).reshape(-1)
+        I = self.paving.inner
+        hit = np.flatnonzero(((I[..., 0] <= x) & (x <= I[..., 1])).all(axis=1))
+        return None if hit.size == 0 else self.witness[hit[0]].copy()
+
+    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), **kw: Any) -> Any:
+        """Draw the paving (inner green, boundary yellow) with axis labels ``x1, x2``."""
+        ax = self.paving.plot(ax=ax, dims=dims, **kw)
+        ax.set_xlabel(f"x{dims[0] + 1}")
+        ax.set_ylabel(f"x{dims[1] + 1}")
+        return ax
+
+
+# ----------------------------------------------------------------------------- search
+def _w_setup(model: Model, robust: bool, w_points: Any) -> tuple[np.ndarray, np.ndarray, str]:
+    """(W box for the inclusion test (l, 2), exclusion points (C, l), semantics)."""
+    l = model.l
+    if l == 0:
+        return np.zeros((0, 2)), np.zeros((1, 0)), ROBUST
+    Wb = model.W.as_array()
+    centre = np.clip(0.5 * Wb[:, 0] + 0.5 * Wb[:, 1], Wb[:, 0], Wb[:, 1])
+    if not robust:
+        return np.stack([centre, centre], axis=-1), centre[None], NOMINAL
+    if w_points is not None:
+        P = np.atleast_2d(np.asarray(w_points, dtype=float))
+        if P.shape[1] != l or not model.W.contains(P).all():
+            raise ValueError(f"w_points must be points of W, shape (C, {l})")
+        return Wb, P, ROBUST
+    pts = [centre]
+    if l <= 3:
+        pts += list(np.asarray(model.W.vertices()))
+    else:
+        for j in range(l):
+            for side in (0, 1):
+                p = centre.copy()
+                p[j] = Wb[j, side]
+                pts.append(p)
+    return Wb, np.unique(np.asarray(pts), axis=0), ROBUST
+
+
+def _search(model: Model, target: _Target, X0: np.ndarray, eps: float, *, robust: bool,
+            obstacles: list[Any], u_eps: float, max_cells: int, w_points: Any,
+            x_scale: np.ndarray | None, max_boxes: int, time_limit: float | None,
+            progress: bool | None, desc: str) -> dict[str, Any]:
+    """One pair search from the state boxes X0 (N, n, 2); raw arrays of the outcome."""
+    Wb, wpts, semantics = _w_setup(model, robust, w_points)
+    clf = _OneStepClassifier(target, Wb, wpts, obstacles)
+    N0 = X0.shape[0]
+    fr = PairFrontier.from_boxes(X0, model.U.as_array(), x_scale=x_scale, u_eps=u_eps,
+                                 max_cells=max_cells,
+                                 data={"witness": np.full((N0, model.m), np.nan)})
+    out = branch_and_bound(fr, clf, eps, max_boxes=max_boxes, time_limit=time_limit,
+                           keep_outer=True, progress=progress, desc=desc)
+    bnd = out.boundary.x_boxes
+    if bnd.shape[0]:  # leftovers of a stopped search hold several cells per box
+        bnd = np.unique(bnd, axis=0)
+    return {"inner": out.inner.x_boxes, "witness": out.inner.data["witness"],
+            "boundary": bnd, "outer": out.outer.x_boxes, "status": out.status,
+            "message": out.message, "levels": out.levels, "n_classified": out.n_classified,
+            "n_discarded": out.n_discarded, "elapsed": out.elapsed, "n_pairs": clf.n_pairs,
+            "semantics": semantics}
+
+
+def _domain(model: Model, X: Any) -> Box:
+    if X is None:
+        D = model.X
+    else:
+        b = as_boxes(X, model.n, "X")
+        if b.shape[0] != 1:
+            raise DimensionError("X must be one box (give obstacles= for holes)")
+        D = Box(b[0, :, 0], b[0, :, 1])
+    if not (np.isfinite(D.lo).all() and np.isfinite(D.hi).all()):
+        raise ValueError(f"the state box must be bounded; got {D}")
+    return D
+
+
+def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
+                 method: str = "auto", X: Any = None, obstacles: Any = None,
+                 u_eps: float = 1 / 16, max_cells: int = 64, w_points: Any = None,
+                 relative: bool = False, max_boxes: int = 2_000_000,
+                 time_limit: float | None = None, progress: bool | None = None,
+                 options: dict[str, Any] | None = None) -> OneStepSet:
+    """Inner approximation of the one-step controllable set ``K(X, T)`` (Alg 4.6, 6.1, 5.2).
+
+    Parameters
+    ----------
+    model : Model
+        ``x+ = f(x, u, w)``; U (bounded) and W are the model's boxes.
+    target : Polytope, PolytopeUnion, Paving, Zonotope, Box, SetUnion or list of them
+        The set T to reach in one step (of a Paving, its inner boxes).
+    eps : float
+        State boxes narrower than eps (relative to X when ``relative``) are not bisected.
+    robust : bool
+        ``True``: ``exists u in U, for all w in W: f(x, u, w) in T`` (the control may depend
+        on the state, never on w). ``False``: w fixed at the centre of W (no effect for a
+        model without disturbance).
+    method : {"auto", "general", "modal"}
+        ``"general"`` (the default of ``"auto"``): the nested state × control search of
+        Alg 4.6/6.1, with a proving control per inner box. ``"modal"``: quantified set
+        inversion with modal intervals (Alg 5.2, :func:`casadi_cmpc.quantified_sivia`),
+        which proves the **weaker** ``for all w exists u`` (u may depend on w) and gives no
+        control; only for one Polytope or Box target.
+    X : Box, optional
+        State constraint box (default: the model's X); the set is searched inside it.
+    obstacles : Box, Polytope or list, optional
+        Forbidden state regions (X with holes): an inner box is proven disjoint from every
+        obstacle.
+    u_eps : float
+        Control cells narrower than this fraction of U (per component) are not split.
+    max_cells : int
+        Largest number of control cells examined at once per state box.
+    w_points : array_like (C, l), optional
+        Points of W used to discard control cells (default: centre and vertices of W for
+        ``l <= 3``, centre and the centres of the faces otherwise). Any points of W are
+        sound; more points discard more.
+    relative : bool
+        Measure state widths relative to X.
+    max_boxes, time_limit, progress
+        Budget (pairs classified, seconds) and tqdm bar; a stopped search is still sound
+        (the rest is boundary) and has status BUDGET.
+    options : dict, optional
+        For ``method="modal"``: passed to :func:`casadi_cmpc.quantified_sivia`.
+
+    Returns
+    -------
+    OneStepSet
+        ``paving`` (inner, boundary, outer boxes), ``witness`` (a proving control per inner
+        box), ``semantics``, ``status``.
+
+    Notes
+    -----
+    **Proof of an inner box.** For a polytope ``T = {y : H y <= h}`` the composed rows
+    ``H f(x, u, w)`` are enclosed by the centered form over the box × {u} × W (outward
+    rounding; H is a thin input of the graph, so CasADi folds no constant): every upper
+    bound ``<= h`` proves ``f(x, u, w) in T`` for all x of the box and all w. For a union,
+    one member must contain the image; for box unions and zonotopes, the interval hull of
+    the image must be inside (exact box-union cover; zonotope facet test).
+
+    **Discarded cells and boxes.** A control cell is discarded for a state box when, for a
+    point ``w_c`` of W, the image ``f(box, cell, w_c)`` is proven disjoint from T. A box is
+    outside when all its cells are discarded: then for every control some w fails, which is
+    the negation of ``exists u for all w``. The cells of a state box always cover U apart
+    from cells discarded before, for the box or a box containing it.
+
+    Examples
+    --------
+    >>> import casadi_cmpc as cm
+    >>> ex = cm.models.load("cannon")                                  # doctest: +SKIP
+    >>> K1 = cm.one_step_set(ex.model, ex.info["terminal"], eps=0.05)  # doctest: +SKIP
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
+    if model.m == 0:
+        raise ModelError(f"model '{model.name}' has no input: a one-step controllable set "
+                         "needs a control")
+    if not (np.isfinite(model.U.lo).all() and np.isfinite(model.U.hi).all()):
+        raise ValueError(f"U must be bounded; got {model.U}")
+    meth = str(method).lower()
+    if meth not in ("auto", "general", "modal"):
+        raise ValueError(f"unknown method '{method}'; valid methods: auto, general, modal")
+    eps = positive_eps(eps)
+    D = _domain(model, X)
+    if meth == "modal":
+        return _modal(model, target, eps, D, robust, relative, max_boxes, time_limit,
+                      progress, options)
+    if options:
+        raise ValueError("options are for method='modal'")
+    obs = _as_obstacles(obstacles, model.n)
+    T = _Target(model, target)
+    scale = np.where(D.diam > 0, D.diam, 1.0) if relative else None
+    r = _search(model, T, D.as_array()[None], eps, robust=robust, obstacles=obs,
+                u_eps=float(u_eps), max_cells=int(max_cells), w_points=w_points,
+                x_scale=scale, max_boxes=max_boxes, time_limit=time_limit,
+                progress=progress, desc="one-step set")
+    pav = Paving(inner=r["inner"], boundary=r["boundary"], outer=r["outer"], domain=D,
+                 n_discarded=r["n_discarded"])
+    msg = (f"{pav.n_inner} state boxes proven ({r['semantics']}), {pav.n_boundary} "
+           f"undecided; {r['message']}")
+    return OneStepSet(status=r["status"], message=msg, method="general (Alg 4.6/6.1)",
+                      nit=r["levels"], n_boxes=r["n_classified"], elapsed=r["elapsed"],
+                      paving=pav, witness=r["witness"], semantics=r["semantics"],
+                      target=target, n_pairs=r["n_pairs"])
+
+
+def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative: bool,
+           max_boxes: int, time_limit: float | None, progress: bool | None,
+           options: dict[str, Any] | None) -> OneStepSet:
+    from ..solvers.quantified import quantified_sivia
+
+    members = _flatten(target)
+    if len(members) != 1 or not isinstance(members[0], Polytope):
+        raise ValueError("method='modal' needs one Polytope or Box target")
+    P = members[0]
+    A, b = np.asarray(P.A, dtype=float), np.asarray(P.b, dtype=float)
+    H = ca.SX.sym("H", A.shape[0], model.n)
+    rows = ca.substitute(ca.mtimes(H, model.f), ca.vec(H), ca.DM(A.ravel(order="F")))
+    if model.l and robust:
+        g = ca.Function("target_rows", [model.x, model.u, model.w], [rows])
+        Wb = model.W
+        sem = MODAL
+    else:
+        if model.l:
+            c = model.W.mid
+            rows = ca.substitute(rows, model.w, ca.DM(c))
+        g = ca.Function("target_rows", [model.x, model.u], [rows])
+        Wb = None
+        sem = NOMINAL if model.l else ROBUST
+    Y = Box(np.full(A.shape[0], -np.inf), b)
+    t0 = time.perf_counter()
+    pav = quantified_sivia(g, D, model.U, Wb, Y, eps, options=options, relative=relative,
+                           max_boxes=max_boxes, time_limit=time_limit, progress=progress)
+    msg = (f"{pav.n_inner} state boxes proven ({sem}), {pav.n_boundary} undecided; "
+           f"{pav.message}")
+    return OneStepSet(status=pav.status, message=msg, method="modal (Alg 5.2)",
+                      nit=pav.levels, n_boxes=pav.n_classified,
+                      elapsed=time.perf_counter() - t0, paving=pav, witness=None,
+                      semantics=sem, target=target, n_pairs=pav.n_pairs)
+
+
+def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
+                    assume_invariant: bool, robust: bool, eps: float) -> Any:
+    """The certificate of T's invariance, or a clear error."""
+    from ..solvers.result import Certificate
+    from .invariance import certify_invariant
+
+    if assume_invariant:
+        return Certificate("assumed", None, "T is control invariant",
+                           "assume_invariant=True: not proven; the sets are then inner "
+                           "approximations of the i-step sets only if T is invariant")
+    if certificate is not None:
+        if not isinstance(certificate, Certificate) or certificate.proved is not True:
+            raise ValueError("certificate must be a proved Certificate of T's invariance "
+                             "(from cm.certify_invariant)")
+        return certificate
+    if law is None:
+        raise ValueError(
+            "the terminal set must be proven (robustly) control invariant: pass law= (the "
+            "local law, e.g. a gain K with u = K x) to certify it with cm.certify_invariant, "
+            "or certificate= a proved Certificate, or assume_invariant=True to proceed "
+            "without a proof")
+    if not isinstance(T, Polytope):
+        raise ValueError("certifying T with law= needs T as a Polytope")
+    W = model.W if (robust and model.l) else (
+        Box(model.W.mid, model.W.mid) if model.l else None)
+    for e in (0.01, 0.003, 0.001):  # finer pieces only while undecided
+        cert = certify_invariant(model, T, law, eps=min(eps, e), W=W, time_limit=60)
+        if cert.proved is not None:
+            break
+    if cert.proved is not True:
+        raise ValueError(f"the terminal set is not proven invariant under the law "
+                         f"({cert.label}: {cert.reason}); pass assume_invariant=True to "
+                         "proceed without a proof")
+    return cert
+
+
+def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
+                      polytopic: bool = False, polytopic_method: str = "separating",
+                      max_steps: int = 100, law: Any = None, certificate: Any = None,
+                      assume_invariant: bool = False, X: Any = None, obstacles: Any = None,
+                      u_eps: float = 1 / 16, max_cells: int = 64, w_points: Any = None,
+                      until: Any = None, max_boxes: int = 2_000_000,
+                      time_limit: float | None = None, progress: bool | None = None) -> Any:
+    """The sequence ``K_0 = T, K_{i+1} = K(X, K_i)`` of (robust) controllable sets (Alg 4.6,
+    6.1, (6.8)), each a proven inner approximation, to convergence.
+
+    Parameters
+    ----------
+    model : Model
+    T : Polytope
+        Terminal set, (robustly) control invariant. It must be proven so: give ``law`` (the
+        local law: a gain ``K`` (m, n), ``u = K x``, or an SX expression of ``model.x``),
+        or ``certificate`` (a proved :class:`~casadi_cmpc.Certificate`), or
+        ``assume_invariant=True`` to proceed without a proof (then nothing is claimed about
+        the nesting of the sets).
+    eps : float
+        State resolution of every step (see :func:`one_step_set`).
+    robust : bool
+        ``exists u for all w`` (True) or w at the centre of W (False).
+    polytopic : bool
+        After each step, replace the union of proven boxes by one polytope proven inside it
+        (:func:`casadi_cmpc.inner_polytope`, ``polytopic_method`` = ``"separating"``, Alg
+        6.2, or ``"scaling"``, Alg 6.5); the next target is the union ``T ∪ P_1 ∪ ... ∪
+        P_i`` (6.8).
+    max_steps : int
+        Largest number of steps.
+    X, obstacles, u_eps, max_cells, w_points
+        As in :func:`one_step_set`.
+    until : array_like (k, n), optional
+        Stop as soon as all these states lie in the last set.
+    max_boxes, time_limit
+        Budget of each step (pairs; seconds).
+    progress : bool or None
+        tqdm bar over the steps.
+
+    Returns
+    -------
+    SetSequence
+        ``sets[i]`` = K_i (a :class:`~casadi_cmpc.SetUnion` of T and the proven boxes, or
+        the polytopes), ``steps`` (boxes first proven at each step, with proving controls),
+        ``converged_at`` (the first i with K_i = K_{i-1}: no new box proven), ``status``,
+        ``level(x)``, ``save``/``load``, ``plot``.
+
+    Notes
+    -----
+    Step i+1 starts from what step i left: its inner boxes stay inner (they reach
+    K_{i-1} ⊆ K_i), and only its outside and undecided boxes are searched again, against the
+    larger target. Every box of K_i is proven to reach K_{i-1} in one step for all w, with
+    its stored control; so ``x in K_i`` is steered into T in at most i steps.
+    """
+    from tqdm.auto import tqdm
+
+    from .linear_sets import SetSequence
+
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
+    if not isinstance(T, Polytope):
+        raise TypeError(f"T must be a Polytope; got {type(T).__name__}")
+    if T.dim != model.n:
+        raise DimensionError(f"T has dimension {T.dim}; the model has n = {model.n}")
+    if model.m == 0:
+        raise ModelError(f"model '{model.name}' has no input")
+    eps = positive_eps(eps)
+    max_steps = int(max_steps)
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be >= 1; got {max_steps}")
+    if polytopic_method not in ("separating", "scaling"):
+        raise ValueError("polytopic_method must be 'separating' (Alg 6.2) or 'scaling' "
+                         "(Alg 6.5)")
+    D = _domain(model, X)
+    obs = _as_obstacles(obstacles, model.n)
+    pts = None if until is None else np.atleast_2d(np.asarray(until, dtype=float))
+    t0 = time.perf_counter()
+    cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps)
+    _, _, semantics = _w_setup(model, robust, w_points)
+    seq = SetSequence(sets=[T], info={
+        "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
+        "polytopic": bool(polytopic), "terminal_certificate": cert.label,
+        "state_names": [f"x{i + 1}" for i in range(model.n)]})
+    frontier = D.as_array()[None]
+    inner = np.zeros((0, model.n, 2))
+    target: Any = T
+    polys: list[Polytope] = []
+    seq.status = "max_steps"
+    bar = tqdm(range(1, max_steps + 1), desc="controllable sets", unit="step",
+               disable=progress is False, delay=0 if progress else 2.0, leave=False)
+    try:
+        for i in bar:
+            ts = time.perf_counter()
+            r = _search(model, _Target(model, target), frontier, eps, robust=robust,
+                        obstacles=obs, u_eps=u_eps, max_cells=max_cells, w_points=w_points,
+                        x_scale=None, max_boxes=max_boxes, time_limit=time_limit,
+                        progress=False, desc=f"K_{i}")
+            new = r["inner"]
+            inner = np.concatenate([inner, new])
+            frontier = np.concatenate([r["outer"], r["boundary"]])
+            step = {"boxes": new, "witness": r["witness"], "polytope": None,
+                    "boundary": r["boundary"].shape[0], "seconds": 0.0}
+            if polytopic and new.shape[0]:
+                from .polytopic import inner_polytope
+
+                P = _as_polytope(inner_polytope(inner, method=polytopic_method))
+                step["polytope"] = P
+                if P is not None and not P.is_empty():
+                    # members proven inside others may be dropped: a smaller target is sound
+                    polys = [Q for Q in polys if not Q.is_subset(P)] + [P]
+                members = [T] + polys
+                K = SetUnion(members, dim=model.n)
+            else:
+                K = SetUnion([T, Paving(inner=inner, domain=D)], dim=model.n)
+            step["seconds"] = time.perf_counter() - ts
+            seq.steps.append(step)
+            seq.sets.append(K)
+            bar.set_postfix(boxes=int(inner.shape[0]), refresh=False)
+            if r["status"] != Status.PROVED:
+                seq.status = "budget"
+                break
+            if new.shape[0] == 0:
+                seq.converged_at = i
+                seq.status = "converged"
+                break
+            if pts is not None and np.all(K.contains(pts)):
+                seq.status = "until"
+                break
+            target = K
+    except KeyboardInterrupt:
+        seq.status = "interrupted"
+    finally:
+        bar.close()
+    seq.info["seconds"] = time.perf_counter() - t0
+    return seq
+
+
+def _as_polytope(res: Any) -> Polytope | None:
+    """The polytope of an ``inner_polytope`` answer (a Polytope, a pair or a result)."""
+    if isinstance(res, Polytope):
+        return res
+    if isinstance(res, tuple):
+        return _as_polytope(res[0])
+    P = getattr(res, "polytope", None)
+    return P if isinstance(P, Polytope) else None
