@@ -1,0 +1,114 @@
+"""The pair frontier of nested existential searches: group reduction and splitting."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from casadi_cmpc.solvers.engine import (
+    DROPPED,
+    INNER,
+    OUTER,
+    UNDECIDED,
+    PairFrontier,
+    branch_and_bound,
+)
+
+
+def _frontier(groups, n=1, m=1):
+    N = len(groups)
+    lo = np.zeros((N, n + m))
+    hi = np.ones((N, n + m))
+    return PairFrontier(lo, hi, np.asarray(groups, dtype=np.intp), n, np.ones(n), np.ones(m),
+                        u_eps=0.1, max_cells=8,
+                        data={"witness": np.arange(N, dtype=float).reshape(N, 1)})
+
+
+def test_reduce_group_inner_if_any_pair_inner_outside_only_if_all():
+    fr = _frontier([0, 0, 1, 1, 2, 2])
+    labels = np.array([OUTER, INNER, OUTER, OUTER, OUTER, UNDECIDED], dtype=np.int8)
+    out, small = fr.reduce(labels, eps=0.01)
+    assert out[1] == INNER and out[0] == DROPPED  # one representative, with its data
+    assert (out[2:4] == [OUTER, DROPPED]).all() or (out[2:4] == [DROPPED, OUTER]).all()
+    assert out[4] == DROPPED and out[5] == UNDECIDED  # a useless cell, a live group
+    assert not small.any()
+    kept = fr.take_done(np.flatnonzero(out == INNER))
+    assert kept.data["witness"][0, 0] == 1.0
+
+
+def test_exhausted_group_becomes_one_boundary_pair():
+    fr = _frontier([0, 0, 0])
+    fr.lo[:, 1] = [0.0, 0.05, 0.5]
+    fr.hi[:, 1] = [0.05, 0.1, 0.55]  # cells narrower than u_eps
+    fr.hi[:, 0] = 0.005  # state box narrower than eps
+    out, small = fr.reduce(np.zeros(3, dtype=np.int8), eps=0.01)
+    assert small.sum() == 1 and (out == UNDECIDED).sum() == 1
+    assert out[small][0] == UNDECIDED
+
+
+def test_split_bisects_cells_first_then_the_state_box_with_the_hull_of_the_cells():
+    fr = PairFrontier.from_boxes(np.array([[[0.0, 1.0], [0.0, 2.0]]]),
+                                 np.array([[-1.0, 1.0]]), u_eps=0.3, max_cells=16,
+                                 data={"witness": np.zeros((1, 1))})
+    seen_x_split = False
+    for _ in range(6):
+        out, small = fr.reduce(np.zeros(len(fr), dtype=np.int8), eps=0.01)
+        fr = fr.take(np.flatnonzero(out == UNDECIDED))
+        nxt, stuck = fr.split()
+        assert len(stuck) == 0
+        groups = np.unique(nxt.group)
+        for g in groups:  # the cells of every group cover U (no cell was discarded)
+            C = nxt.u_cells[nxt.group == g][:, 0, :]
+            C = C[np.argsort(C[:, 0])]
+            assert C[0, 0] == -1.0 and C[-1, 1] == 1.0
+            assert (C[1:, 0] <= C[:-1, 1]).all()
+            X = nxt.x_boxes[nxt.group == g]
+            assert (X == X[0]).all()  # one state box per group
+        if len(groups) > 1:
+            seen_x_split = True
+        fr = nxt
+    assert seen_x_split
+
+
+def test_discarded_cells_shrink_the_inherited_cell():
+    fr = PairFrontier.from_boxes(np.array([[[0.0, 1.0]]]), np.array([[0.0, 1.0]]),
+                                 u_eps=0.3, max_cells=16, data={"witness": np.zeros((1, 1))})
+    out, _ = fr.reduce(np.zeros(1, dtype=np.int8), eps=0.01)
+    fr = fr.take(out == UNDECIDED).split()[0]  # cells [0, .5], [.5, 1]
+    out, _ = fr.reduce(np.zeros(2, dtype=np.int8), eps=0.01)
+    fr = fr.take(out == UNDECIDED).split()[0]  # four cells of width .25
+    lab = np.where(fr.u_cells[:, 0, 0] < 0.5, OUTER, UNDECIDED).astype(np.int8)
+    out, _ = fr.reduce(lab, eps=0.01)
+    ch = fr.take(out == UNDECIDED).split()[0]  # cells too narrow: the state box splits
+    assert len(np.unique(ch.group)) == 2
+    assert (ch.u_cells[:, 0, 0] == 0.5).all() and (ch.u_cells[:, 0, 1] == 1.0).all()
+
+
+@settings(max_examples=40, deadline=None)
+@given(a=st.floats(-2, 2), c=st.floats(0.1, 1.0), eps=st.sampled_from([0.05, 0.02]))
+def test_search_exists_u_on_a_scalar_problem(a, c, eps):
+    """x in [0, 1], u in [-1, 1]: x + c u in [a - .2, a + .2] for some u iff x lies in
+    [a - .2 - c, a + .2 + c]; the proven boxes and witnesses are checked against it."""
+    def classify(fr):
+        X, U = fr.x_boxes[:, 0], fr.u_cells[:, 0]
+        lab = np.zeros(len(fr), dtype=np.int8)
+        ylo, yhi = X[:, 0] + c * U[:, 0], X[:, 1] + c * U[:, 1]
+        lab[(yhi < a - 0.2) | (ylo > a + 0.2)] = OUTER
+        mid = 0.5 * (U[:, 0] + U[:, 1])
+        ok = (X[:, 0] + c * mid >= a - 0.2) & (X[:, 1] + c * mid <= a + 0.2)
+        lab[ok] = INNER
+        fr.data["witness"][ok, 0] = mid[ok]
+        return lab
+
+    fr = PairFrontier.from_boxes(np.array([[[0.0, 1.0]]]), np.array([[-1.0, 1.0]]),
+                                 u_eps=1 / 16, data={"witness": np.full((1, 1), np.nan)})
+    out = branch_and_bound(fr, classify, eps, progress=False)
+    inner, outer = out.inner.x_boxes[:, 0], out.outer.x_boxes[:, 0]
+    lo, hi = a - 0.2 - c, a + 0.2 + c
+    assert ((inner[:, 0] >= lo - 1e-12) & (inner[:, 1] <= hi + 1e-12)).all()
+    assert ((outer[:, 1] < lo) | (outer[:, 0] > hi)).all()
+    w = out.inner.data["witness"][:, 0]
+    tol = 1e-12
+    assert ((inner[:, 0] + c * w >= a - 0.2 - tol) & (inner[:, 1] + c * w <= a + 0.2 + tol)).all()
+    # the pieces cover [0, 1] (inner, outer, boundary together)
+    allb = np.concatenate([inner, outer, out.boundary.x_boxes[:, 0]])
+    assert np.isclose((allb[:, 1] - allb[:, 0]).sum(), 1.0)
