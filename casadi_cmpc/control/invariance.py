@@ -1,14 +1,20 @@
-"""Local laws and invariance certificates (thesis §4.2.6, Alg 4.3).
+"""Local laws and invariance certificates (thesis §4.2.6-4.2.7, Alg 4.3 and 4.4).
 
 * :func:`local_lqr` — the LQR gain of the linearisation at an equilibrium (python-control);
 * :func:`certify_invariant` — proves ``f(x, law(x), w) in S`` and ``law(x) in U`` for every
-  ``x in S`` and ``w in W`` by set inversion over sub-zonotopes of S (Alg 4.3), or refutes it
-  with a counterexample point.
+  ``x in S`` and ``w in W`` (S a polytope or a zonotope) by set inversion over
+  sub-zonotopes of S (Alg 4.3), or refutes it with a counterexample point;
+* :func:`largest_invariant_zonotope` — global search over an interval generator matrix for
+  the largest zonotope proven invariant under a given law (Alg 4.4).
 """
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import time
+import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
@@ -18,10 +24,15 @@ from .._validate import float_vector as _vector
 from .._validate import weight_matrix as _weight
 from ..exceptions import DimensionError, ModelError, UnsupportedOperationError
 from ..model import Model
+from ..sets.box import Box
 from ..sets.polytope import Polytope
-from ..solvers.result import Certificate
+from ..sets.zonotope import Zonotope, zonotope_inclusion
+from ..solvers._common import positive_eps
+from ..solvers.engine import Status
+from ..solvers.result import Certificate, Result
 
-__all__ = ["certify_invariant", "local_lqr"]
+__all__ = ["certify_invariant", "local_lqr", "largest_invariant_zonotope",
+           "InvariantZonotopeResult"]
 
 
 def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
@@ -86,12 +97,42 @@ def _law_expr(model: Model, law: Any) -> ca.SX:
     return ca.mtimes(ca.DM(K), model.x)
 
 
-def _domain(S: Polytope) -> Any:
-    """A zonotope covering S: S itself when S is a parallelotope (n pairs of opposite rows),
-    else a bounding parallelotope; generators widened by 1e-9 relative in both cases."""
-    from ..sets.zonotope import Zonotope
+def _check_target(S: Any, n: int) -> None:
+    """S must be a bounded Polytope or a full-dimensional Zonotope of dimension n."""
+    if isinstance(S, Zonotope):
+        if S.dim != n:
+            raise DimensionError(f"S has dimension {S.dim}, the model has n = {n}")
+        if not S.is_full_dimensional():
+            raise UnsupportedOperationError(
+                "S is a flat zonotope (its generators are not proven to span R^n): its "
+                "interior is empty and set inversion cannot prove f(S) ⊆ S; give a "
+                "full-dimensional zonotope")
+        if S._facet_data() is None:
+            raise UnsupportedOperationError(
+                f"S has too many generators ({S.n_generators}) to enumerate its facets in "
+                f"dimension {n}; bound it by a zonotope of lower order first")
+        return
+    if not isinstance(S, Polytope):
+        hint = " (convert it with Polytope.from_box)" if isinstance(S, Box) else ""
+        raise UnsupportedOperationError(
+            f"certify_invariant needs S as a Polytope or a Zonotope; got "
+            f"{type(S).__name__}{hint}")
+    if S.dim != n:
+        raise DimensionError(f"S has dimension {S.dim}, the model has n = {n}")
+
+
+def _domain(S: Any) -> Zonotope:
+    """A zonotope covering S, generators widened by 1e-9 relative.
+
+    A Zonotope S is its own domain. A Polytope S that is a parallelotope (n pairs of
+    opposite rows) is written as a zonotope, any other one is bounded by a parallelotope.
+    """
     from ..solvers.zonotope_sivia import _bounding_parallelotope
 
+    if isinstance(S, Zonotope):
+        G = S.generators
+        G = G[:, np.any(G != 0.0, axis=0)]
+        return Zonotope(S.center, G * (1.0 + 1e-9))
     A, b = S.A, S.b
     n = S.dim
     if A.shape[0] == 2 * n:
@@ -117,15 +158,79 @@ def _domain(S: Polytope) -> Any:
     return _bounding_parallelotope(S)
 
 
-def _disjoint(fr: Any, S: Polytope) -> np.ndarray:
-    """Per element of a ZonotopeFrontier: proven disjoint from S (a row separates)."""
+def _disjoint(fr: Any, S: Any) -> np.ndarray:
+    """Per element of a ZonotopeFrontier: proven disjoint from S."""
     if len(fr) == 0:
         return np.zeros(0, dtype=bool)
+    if isinstance(S, Zonotope):
+        from ..solvers.zonotope_sivia import _ZonotopeTest
+
+        return _ZonotopeTest(S).disjoint(fr.centers, fr.generators, fr.radii)
     _, hi = fr.support_bounds(-S.A)  # h_Z(-a) <= hi, so min_Z a.x >= -hi
     return (-hi > S.b[None, :]).any(axis=1)
 
 
-def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any = None,
+def _proven_in(S: Any, P: np.ndarray) -> np.ndarray:
+    """Points proven inside S (a degenerate box certified inside)."""
+    if P.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(S.contains_box(np.stack([P, P], axis=-1)), dtype=bool)
+
+
+def _sample_points(S: Any, k: int, rng: np.random.Generator) -> np.ndarray:
+    """Vertices of S pulled slightly inwards, its centre and ``k`` random points (some of
+    them at sign vectors of the generators of a zonotope): candidates for counterexamples."""
+    V = np.asarray(S.vertices(), dtype=float)
+    if isinstance(S, Zonotope):
+        c = S.center
+        G = S.generators
+        a = rng.uniform(-1.0, 1.0, (k, G.shape[1]))
+        a[: k // 2] = np.sign(a[: k // 2])
+        R = c + (1.0 - 1e-7) * (a @ G.T)
+    else:
+        c = V.mean(axis=0)
+        bb = S.bounding_box()
+        R = bb.lo + (bb.hi - bb.lo) * rng.random((k, S.dim))
+    return np.concatenate([V, c + (1 - 1e-9) * (V - c), c + (1 - 1e-6) * (V - c), c[None],
+                           R])
+
+
+def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fun: Any,
+                          w_pts: np.ndarray, claim: str, details: dict
+                          ) -> Certificate | None:
+    """A refutation by one of the points P, each proven inside S and proven (by interval
+    evaluations at the point) to have its input outside U or a successor outside S."""
+    P = P[_proven_in(S, P)]
+    if P.shape[0] == 0:
+        return None
+    u = np.asarray(law_fun.map(P.shape[0])(P.T), dtype=float).T.reshape(-1, model.m)
+    UL = cl.law_inclusion()(np.stack([P, P], axis=-1))
+    out_u = ((UL[:, :, 1] < model.U.lo) | (UL[:, :, 0] > model.U.hi)).any(axis=1)
+    if out_u.any():
+        k = int(np.argmax(np.abs(u).max(axis=1) * out_u))
+        return Certificate(
+            "refuted", False, claim,
+            f"input bound: law(x) = {u[k].tolist()} lies outside U = "
+            f"[{model.U.lo.tolist()}, {model.U.hi.tolist()}] at x = {P[k].tolist()}",
+            details, counterexample=P[k])
+    for wv in w_pts:
+        nxt = cl.step(P, None, np.broadcast_to(wv, (P.shape[0], model.l))
+                      if model.l else None)
+        Wt = (np.broadcast_to(np.stack([wv, wv], axis=-1), (P.shape[0], model.l, 2))
+              if model.l else None)
+        enc = cl.inclusion("natural")(np.stack([P, P], axis=-1), None, Wt)
+        out_s = ~np.asarray(S.intersects_box(enc), dtype=bool)
+        if out_s.any():
+            k = int(np.flatnonzero(out_s)[0])
+            ws = f" with w = {wv.tolist()}" if model.l else ""
+            return Certificate(
+                "refuted", False, claim,
+                f"state set: f(x, law(x)){ws} = {nxt[k].tolist()} lies outside S at "
+                f"x = {P[k].tolist()}", details, counterexample=P[k])
+    return None
+
+
+def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = None,
                       max_boxes: int = 200_000, time_limit: float | None = None,
                       samples: int = 64, seed: int = 0,
                       progress: bool | None = None) -> Certificate:
@@ -134,13 +239,19 @@ def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any
     The claim: for every ``x in S`` and every ``w in W``, ``f(x, law(x), w) in S`` and
     ``law(x) in U``. Two set inversions over sub-zonotopes of S (the successor into S, the
     law into U) decide it piece by piece (:func:`casadi_cmpc.solvers.zonotope_sivia`).
+    ``S ⊆ X`` (the model's state box) is not part of the claim: check it apart.
 
     Parameters
     ----------
     model : Model
-    S : Polytope
-        A bounded polytope (a Zonotope target is not supported yet: pass its polytope only
-        if you can prove the polytope is inside it).
+    S : Polytope or Zonotope
+        A bounded polytope, or a full-dimensional zonotope (with at most
+        ``casadi_cmpc.sets.zonotope.MAX_FACETS`` facet candidates). For a zonotope the
+        pieces are sub-zonotopes of S itself (its generators widened by 1e-9 relative) and
+        ``f(piece) ⊆ S`` is proven against the exact facets of S: an upper bound of the
+        support of the enclosure of ``f(piece)`` must not exceed a *lower* bound of the
+        support of S in each facet normal (never ``S.to_polytope()``, whose outward-rounded
+        offsets describe a slightly larger set, nor a bounding box).
     law : array_like (m, n) or casadi.SX (m, 1)
         Gain ``K`` (``u = K x``) or an expression of ``model.x``.
     eps : float
@@ -150,34 +261,63 @@ def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any
     max_boxes, time_limit, progress
         Budget and progress bar of each set inversion.
     samples, seed
-        Points tried per unresolved piece when looking for a counterexample.
+        Random points of S, and points per unresolved piece, tried as counterexamples.
 
     Returns
     -------
     Certificate
-        ``proved`` True (every piece meeting S proven good), False (a piece meeting S
-        proven bad, or a point of S whose input or successor is proven, by an interval
-        evaluation at the point, to violate a condition: the ``counterexample`` and the
-        violated condition are given), or None (undecided:
-        ``details["undecided_pieces"]`` holds their number and bounding boxes).
-    """
-    from ..solvers.zonotope_sivia import zonotope_sivia
+        ``proved`` True (every piece meeting S proven good), False (a point of S whose
+        input or successor is proven to violate a condition, by an interval evaluation at
+        the point or by the enclosure of a piece containing it: the ``counterexample`` and
+        the violated condition are given; such points are searched first, among the
+        vertices of S and random points of S, and then in the undecided pieces), or None
+        (undecided: ``details["undecided_pieces"]`` holds their number and bounding boxes).
+        A counterexample is always proven to lie in S (a degenerate box certified inside
+        by ``S.contains_box``).
 
+    Raises
+    ------
+    UnsupportedOperationError
+        S is neither a Polytope nor a Zonotope, or a flat zonotope, or one with too many
+        facets.
+    DimensionError
+        S or the law has the wrong dimension.
+    """
     if not isinstance(model, Model):
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
-    if not isinstance(S, Polytope):
-        raise UnsupportedOperationError(
-            f"certify_invariant needs S as a Polytope; got {type(S).__name__}")
-    if S.dim != model.n:
-        raise DimensionError(f"S has dimension {S.dim}, the model has n = {model.n}")
-    t0 = time.perf_counter()
+    _check_target(S, model.n)
+    return _certify(model, _closed(model, law), S, eps, W, max_boxes, time_limit, samples,
+                    seed, progress)
+
+
+def _closed(model: Model, law: Any) -> tuple[Model, Any]:
+    """The closed loop and the law as a Function (compiled once, reused by searches)."""
     expr = _law_expr(model, law)
-    cl = model.closed_loop(expr)
-    law_fun = ca.Function("law", [model.x], [expr])
+    return model.closed_loop(expr), ca.Function("law", [model.x], [expr])
+
+
+def _certify(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W: Any,
+             max_boxes: int, time_limit: float | None, samples: int, seed: int,
+             progress: bool | None) -> Certificate:
+    """certify_invariant after validation, with the closed loop given."""
+    from ..solvers.zonotope_sivia import zonotope_sivia
+
+    t0 = time.perf_counter()
+    cl, law_fun = closed
     Wb = W if W is not None else model.W
     claim = ("for every x in S" + (" and every w in W" if model.l else "")
              + ": f(x, law(x), w) in S and law(x) in U")
-    # the pieces cover a parallelotope around S; pieces proven disjoint from S are left out,
+    rng = np.random.default_rng(seed)
+    w_pts = (np.asarray(Wb.vertices()) if model.l else np.zeros((1, 0)))
+    details: dict[str, Any] = {}
+    # a cheap search first: vertices and random points of S
+    cert = _point_counterexample(_sample_points(S, samples, rng), S, model, cl, law_fun, w_pts,
+                                 claim, details)
+    if cert is not None:
+        details["seconds"] = time.perf_counter() - t0
+        details["stage"] = "sampled points of S (before the set inversion)"
+        return cert
+    # the pieces cover a zonotope around S; pieces proven disjoint from S are left out,
     # the others must satisfy the conditions on the whole piece (sufficient)
     Z0 = _domain(S)
     runs = {
@@ -186,7 +326,6 @@ def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any
         "input bound": zonotope_sivia(law_fun, Z0, model.U, eps, max_boxes=max_boxes,
                                       time_limit=time_limit, progress=progress),
     }
-    details: dict[str, Any] = {}
     unresolved = []
     for name, pav in runs.items():
         bad = ~_disjoint(pav.outer, S) if len(pav.outer) else np.zeros(0, dtype=bool)
@@ -199,56 +338,40 @@ def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any
             meet = ~_disjoint(pav.boundary, S)
             if meet.any():
                 unresolved.append((name, pav.boundary, meet, False))
-    rng = np.random.default_rng(seed)
-    w_pts = (np.asarray(Wb.vertices()) if model.l else np.zeros((1, 0)))
-    # look for a concrete counterexample: proven-bad pieces first, then undecided ones,
-    # and the vertices of S
-    V = np.asarray(S.vertices())
-    c = V.mean(axis=0)
-    cands = [V, c + (1 - 1e-9) * (V - c), c + (1 - 1e-6) * (V - c)]
+    # look for a concrete counterexample in the proven-bad pieces first, then in the
+    # undecided ones
+    cands = [np.zeros((0, model.n))]
     for _, fr, mask, _ in unresolved:
-        pts = fr.sample(samples, rng=rng)[mask].reshape(-1, model.n)
-        centres = np.asarray(fr.centers)[mask]
-        cands += [centres, pts]
-    P = np.concatenate(cands)
-    # candidates proven inside S (a thin box certified inside)
-    P = P[np.asarray(S.contains_box(np.stack([P, P], axis=-1)), dtype=bool)]
-    if P.shape[0]:
-        u = np.asarray(law_fun.map(P.shape[0])(P.T), dtype=float).T.reshape(-1, model.m)
-        # a violation counts only when an interval evaluation at the point confirms it
-        UL = cl.law_inclusion()(np.stack([P, P], axis=-1))
-        out_u = ((UL[:, :, 1] < model.U.lo) | (UL[:, :, 0] > model.U.hi)).any(axis=1)
-        if out_u.any():
-            k = int(np.argmax(np.abs(u).max(axis=1) * out_u))
-            return Certificate(
-                "refuted", False, claim,
-                f"input bound: law(x) = {u[k].tolist()} lies outside U = "
-                f"[{model.U.lo.tolist()}, {model.U.hi.tolist()}] at x = {P[k].tolist()}",
-                details, counterexample=P[k])
-        for wv in w_pts:
-            nxt = cl.step(P, None, np.broadcast_to(wv, (P.shape[0], model.l))
-                          if model.l else None)
-            Wt = (np.broadcast_to(np.stack([wv, wv], axis=-1), (P.shape[0], model.l, 2))
-                  if model.l else None)
-            enc = cl.inclusion("natural")(np.stack([P, P], axis=-1), None, Wt)
-            out_s = ~np.asarray(S.intersects_box(enc), dtype=bool)
-            if out_s.any():
-                k = int(np.flatnonzero(out_s)[0])
-                ws = f" with w = {wv.tolist()}" if model.l else ""
+        cands += [np.asarray(fr.centers)[mask],
+                  fr.sample(samples, rng=rng)[mask].reshape(-1, model.n)]
+    cert = _point_counterexample(np.concatenate(cands), S, model, cl, law_fun, w_pts, claim,
+                                 details)
+    details["seconds"] = time.perf_counter() - t0
+    if cert is not None:
+        return cert
+    # a proven-bad piece refutes the claim only where it is proven to meet S: its centre
+    # (a point of the piece) proven inside S is a counterexample by the piece's enclosure
+    still = []
+    for name, fr, mask, proven in unresolved:
+        if proven:
+            idx = np.flatnonzero(mask)
+            C = np.asarray(fr.centers)[idx]
+            ins = _proven_in(S, C)
+            if ins.any():
+                x = C[int(np.flatnonzero(ins)[0])]
+                what = ("law(x) lies outside U" if name == "input bound" else
+                        "f(x, law(x), w) lies outside S" + (" for every w in W" if model.l
+                                                             else ""))
                 return Certificate(
                     "refuted", False, claim,
-                    f"state set: f(x, law(x)){ws} = {nxt[k].tolist()} lies outside S at "
-                    f"x = {P[k].tolist()}", details, counterexample=P[k])
-    details["seconds"] = time.perf_counter() - t0
-    proven_bad = [(name, fr, mask) for name, fr, mask, proven in unresolved if proven]
-    if proven_bad:
-        name, fr, mask = proven_bad[0]
-        return Certificate(
-            "refuted", False, claim,
-            f"{name}: {int(mask.sum())} pieces of S proven to violate the condition (no "
-            "sampled point found to show it numerically)", details)
-    if unresolved:
-        boxes = np.concatenate([fr.bounding_boxes()[mask] for _, fr, mask, _ in unresolved])
+                    f"{name}: {what} at x = {x.tolist()} (x proven inside S; the enclosure "
+                    "over a piece of S containing x is proven disjoint from the target)",
+                    details, counterexample=x)
+            mask = np.zeros(len(fr), dtype=bool)
+            mask[idx] = True
+        still.append((name, fr, mask))
+    if still:
+        boxes = np.concatenate([fr.bounding_boxes()[mask] for _, fr, mask in still])
         details["undecided_pieces"] = int(boxes.shape[0])
         details["undecided_boxes"] = boxes
         budget = any(p.status.name == "BUDGET" for p in runs.values())
@@ -260,3 +383,247 @@ def certify_invariant(model: Model, S: Polytope, law: Any, eps: float, *, W: Any
                        "set inversion over sub-zonotopes of S (Alg 4.3): every piece meeting "
                        "S has its successor inside S and its input inside U, with outward "
                        "rounding", details)
+
+
+# ------------------------------------------------------------------- Alg 4.4
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class InvariantZonotopeResult(Result):
+    """Result of :func:`largest_invariant_zonotope`.
+
+    Attributes
+    ----------
+    zonotope : Zonotope or None
+        The largest zonotope found that is PROVEN invariant (its ``certificate`` has
+        ``proved is True``); ``None`` when no zonotope of the search was proven invariant.
+    volume : float
+        Its volume (area in 2-D), 0.0 when ``zonotope`` is None.
+    certificate : Certificate or None
+        The certificate of :func:`certify_invariant` for ``zonotope``.
+    M : ndarray, shape (n, m, 2), or None
+        The interval matrix whose zonotope inclusion ``center ⊕ ◇(M B^m)`` is ``zonotope``.
+    stats : dict
+        ``iterations`` (families taken from the queue), ``tested`` (families certified),
+        ``proved``, ``refuted``, ``undecided``, ``outside_X`` (zonotopes not proven inside
+        the model's X, hence not tested), ``queued`` (families left when the search
+        stopped), ``seconds``, ``certify_seconds``.
+    status, success, message, method, nit, n_boxes, elapsed
+        See :class:`~casadi_cmpc.solvers.result.Result`: ``PROVED`` (0) the search
+        completed and found a zonotope proven invariant; ``BUDGET`` (1) ``max_iter``,
+        ``time_limit`` or an interruption stopped it (``zonotope``, if any, is still
+        proven invariant, but a larger one may exist); ``UNDECIDED`` (3) the search
+        completed and no zonotope was proven invariant. ``nit`` counts iterations,
+        ``n_boxes`` the families certified.
+    """
+
+    zonotope: Zonotope | None
+    volume: float
+    certificate: Certificate | None
+    M: np.ndarray | None
+    stats: dict = field(default_factory=dict)
+
+    def _repr_parts(self) -> list[str]:
+        return [f"volume={self.volume:.6g}",
+                f"generators={None if self.zonotope is None else self.zonotope.n_generators}"]
+
+
+def _interval_matrix(M0: Any, n: int) -> np.ndarray:
+    M = np.array(M0, dtype=float)
+    if M.ndim != 3 or M.shape[2] != 2 or M.shape[0] != n or M.shape[1] < 1:
+        raise DimensionError(
+            f"M0 must be an interval matrix of shape (n, m, 2) = ({n}, m, 2) (entries as "
+            f"[lo, hi]); got shape {M.shape}")
+    if not np.isfinite(M).all():
+        raise ValueError("M0 has a NaN or infinite bound")
+    if (M[..., 0] > M[..., 1]).any():
+        i, j = np.argwhere(M[..., 0] > M[..., 1])[0]
+        raise ValueError(f"M0 is empty at entry ({i}, {j}): {M[i, j, 0]} > {M[i, j, 1]}")
+    return M
+
+
+def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
+                               eps_sivia: float, *, W: Any = None, center: Any = None,
+                               relative_eps: bool = True, max_iter: int = 100_000,
+                               time_limit: float | None = None, max_boxes: int = 200_000,
+                               samples: int = 64, seed: int = 0,
+                               progress: bool | None = None) -> InvariantZonotopeResult:
+    r"""The largest zonotope proven invariant under ``u = law(x)`` (thesis Alg 4.4, GOF SIVZG).
+
+    Candidates are the zonotope inclusions ``Z_k = center ⊕ ◇(M_k B^m)`` (Thm 4.3:
+    ``Mid(M_k) B^m ⊕ G B^n``, ``G`` diagonal with ``G_ii = sum_j Rad(M_k)_ij``, i.e.
+    ``m + n`` generators) of interval matrices ``M_k`` obtained from ``M0`` by bisecting the
+    widest entry. Each candidate is tested by :func:`certify_invariant` (set inversion via
+    zonotope geometry, Alg 4.3) and must lie inside the model's state box X; the largest
+    candidate proven invariant is returned.
+
+    Parameters
+    ----------
+    model : Model
+    law : array_like (m_u, n) or casadi.SX (m_u, 1)
+        Gain ``K`` (``u = K x``) or an expression of ``model.x``.
+    M0 : array_like, shape (n, m, 2)
+        The initial interval generator matrix, entry ``(i, j)`` as ``[lo, hi]``.
+    eps_opt : float
+        Interval matrices whose widest entry is at most ``eps_opt`` are not bisected.
+    eps_sivia : float
+        Tolerance of the set inversion of each test: pieces whose largest generator entry
+        is at most ``eps_sivia * Max(H_k)`` (``relative_eps=True``, the default, with
+        ``Max(H_k)`` the largest generator entry of the candidate) or ``eps_sivia``
+        (``relative_eps=False``) are not split.
+    W : Box, optional
+        Disturbance box (default: the model's W): robust invariance.
+    center : array_like (n,), optional
+        Centre of the candidates (default: the origin).
+    relative_eps : bool
+        See ``eps_sivia``. The thesis' value for E6 (0.05) exceeds the generators of every
+        candidate there, so read as an absolute tolerance it would allow no bisection at
+        all; read relative to the candidate it is a resolution of 1/20 of its size.
+    max_iter, time_limit : optional
+        Limits on the families taken from the queue and on the wall-clock time (s); a
+        stopped search returns its best proven zonotope with status BUDGET.
+    max_boxes : int
+        Budget of each set inversion (pieces classified).
+    samples, seed
+        Random points tried as counterexamples (see :func:`certify_invariant`).
+    progress : bool or None
+        tqdm progress bar (None: only for searches longer than 2 s).
+
+    Returns
+    -------
+    InvariantZonotopeResult
+        ``zonotope`` (proven invariant, or None), ``volume``, ``certificate``, ``M``,
+        ``stats``, ``status`` (see the class).
+
+    Notes
+    -----
+    The inclusion ``◇`` is monotone: ``M' ⊆ M`` gives ``◇(M' B^m) ⊆ ◇(M B^m)`` (each
+    support function decreases), so ``Vol(◇(M_k B^m))`` bounds the volume of every
+    candidate below ``M_k``. The queue is therefore ordered by that volume (largest first;
+    the thesis pops a stack) and the search stops as soon as the next bound does not
+    exceed the volume of the best proven candidate: the result is the largest proven
+    candidate of the thesis' search tree, without testing the (smaller) children of proven
+    families. A candidate refuted by a counterexample or left undecided is bisected, as in
+    Alg 4.4. Only ``certify_invariant`` proofs count: the returned zonotope is proven
+    invariant (with outward rounding); that no larger candidate is invariant is NOT
+    claimed (undecided candidates may be).
+
+    Examples
+    --------
+    >>> import casadi as ca, numpy as np, casadi_cmpc as cm
+    >>> x = ca.SX.sym("x", 2); u = ca.SX.sym("u")
+    >>> f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * (u + 0.2 * ca.sin(x[0])))
+    >>> model = cm.Model(x=x, u=u, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-2], [2]))
+    >>> K = cm.local_lqr(model, np.eye(2), 1.0)
+    >>> M0 = [[[0.0, 0.4], [-0.4, 0.0]], [[0.0, 0.4], [0.0, 0.4]]]
+    >>> res = cm.largest_invariant_zonotope(model, K, M0, eps_opt=0.1, eps_sivia=0.1,
+    ...                                     progress=False)
+    >>> res.status.name, res.certificate.proved, round(res.volume, 4)
+    ('PROVED', True, 1.12)
+    >>> res.zonotope.generators  # Mid(M) and Kuhn's diagonal
+    array([[ 0.35, -0.25,  0.1 ,  0.  ],
+           [ 0.15,  0.35,  0.  ,  0.1 ]])
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from tqdm.auto import tqdm
+
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
+    n = model.n
+    M0a = _interval_matrix(M0, n)
+    eps_opt = positive_eps(eps_opt, "eps_opt")
+    eps_sivia = positive_eps(eps_sivia, "eps_sivia")
+    c = _vector(center, n, "center", np.zeros(n))
+    closed = _closed(model, law)  # compiled once for all the tests
+    X = getattr(model, "X", None)
+    t0 = time.perf_counter()
+    counter = itertools.count()
+    heap: list[tuple[float, int, np.ndarray, Zonotope]] = []
+
+    def push(M: np.ndarray) -> None:
+        Z = zonotope_inclusion(c, M[..., 0], M[..., 1])
+        v = Z.volume()
+        if v > 0.0:  # flat families stay flat below: never larger than anything
+            heapq.heappush(heap, (-v, next(counter), M, Z))
+
+    push(M0a)
+    best: tuple[Zonotope, float, Certificate, np.ndarray] | None = None
+    st = {"iterations": 0, "tested": 0, "proved": 0, "refuted": 0, "undecided": 0,
+          "outside_X": 0, "certify_seconds": 0.0}
+    status, message = Status.PROVED, "search completed"
+    bar = tqdm(total=None, desc="invariant zonotope", unit="family",
+               disable=progress is False, delay=0 if progress else 2.0, leave=False)
+    try:
+        while heap:
+            if best is not None and -heap[0][0] <= best[1]:
+                break  # nothing left can be larger than the best proven candidate
+            if st["iterations"] >= max_iter:
+                status, message = Status.BUDGET, f"max_iter = {max_iter} reached"
+                break
+            elapsed = time.perf_counter() - t0
+            if time_limit is not None and elapsed > time_limit:
+                status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
+                break
+            negv, _, M, Z = heapq.heappop(heap)
+            st["iterations"] += 1
+            proved = False
+            if X is not None and not Z.contained_in(X):
+                st["outside_X"] += 1
+            elif Z.is_full_dimensional() and Z._facet_data() is not None:
+                G = Z.generators
+                eps = eps_sivia * float(np.abs(G).max()) if relative_eps else eps_sivia
+                left = None if time_limit is None else max(time_limit - elapsed, 1e-3)
+                t1 = time.perf_counter()
+                cert = _certify(model, closed, Z, eps, W, max_boxes, left, samples, seed,
+                                False)
+                st["certify_seconds"] += time.perf_counter() - t1
+                st["tested"] += 1
+                if cert.proved is True:
+                    st["proved"] += 1
+                    proved = True
+                    best = (Z, -negv, cert, M)
+                elif cert.proved is False:
+                    st["refuted"] += 1
+                else:
+                    st["undecided"] += 1
+            if not bar.disable:
+                bar.update(1)
+                bar.set_postfix(best=0.0 if best is None else best[1], queue=len(heap),
+                                refresh=False)
+            if proved:
+                continue  # the children are inside Z: none is larger
+            w = M[..., 1] - M[..., 0]
+            if w.max() <= eps_opt:
+                continue
+            i, j = np.unravel_index(int(np.argmax(w)), w.shape)  # widest, first in row order
+            mid = 0.5 * M[i, j, 0] + 0.5 * M[i, j, 1]
+            L, R = M.copy(), M.copy()
+            L[i, j, 1] = mid
+            R[i, j, 0] = mid
+            push(L)
+            push(R)
+    except KeyboardInterrupt:
+        status, message = Status.BUDGET, "interrupted"
+    finally:
+        bar.close()
+    st["queued"] = len(heap)
+    st["seconds"] = time.perf_counter() - t0
+    if best is None:
+        if status == Status.PROVED:
+            status = Status.UNDECIDED
+            message = ("search completed: no zonotope of the search was proven invariant "
+                       f"({st['refuted']} refuted, {st['undecided']} undecided, "
+                       f"{st['outside_X']} not inside X)")
+        else:
+            message += "; no zonotope proven invariant so far"
+        zon, vol, cert, Mb = None, 0.0, None, None
+    else:
+        zon, vol, cert, Mb = best
+        if status == Status.PROVED:
+            message = (f"search completed: the largest candidate proven invariant has volume "
+                       f"{vol:.6g}")
+        else:
+            message += f"; best zonotope proven invariant so far has volume {vol:.6g}"
+    return InvariantZonotopeResult(
+        status=status, message=message, method="GOF SIVZG (Alg 4.4)", nit=st["iterations"],
+        n_boxes=st["tested"], elapsed=st["seconds"], zonotope=zon, volume=float(vol),
+        certificate=cert, M=None if Mb is None else Mb.copy(), stats=st)

@@ -10,8 +10,10 @@ Thm 4.1, ``concat``), so Alg 4.3 is the engine with a zonotope classifier
   mean-value form with an interval Jacobian over the bounding box of ``Z``, bounded by Kühn's
   zonotope inclusion (thesis (4.14)-(4.16), Thm 4.4);
 * ``Z`` is INNER when the enclosure is proven inside the target ``Y`` (support functions of
-  the enclosure against the rows of a polytope), OUTER when it is proven disjoint from ``Y``
-  (a separating inequality implied by the rows of ``Y``), else UNDECIDED; undecided
+  the enclosure against the rows of a polytope, or against lower bounds of the supports of
+  a zonotope target in its exact facet normals), OUTER when it is proven disjoint from ``Y``
+  (a separating inequality implied by the rows of ``Y``, or a separating direction of two
+  zonotopes), else UNDECIDED; undecided
   zonotopes whose largest ``|h_ij|`` (4.12) is at most ``eps`` are kept as boundary, the
   others bisected along the generator holding it (4.13).
 
@@ -534,6 +536,80 @@ class _PolytopeTest:
         return out
 
 
+class _ZonotopeTest:
+    """Proofs of ``Z ⊆ S`` and ``Z ∩ S = ∅`` for a zonotope batch and a zonotope target S.
+
+    Inclusion (exact criterion for a full-dimensional S, rounded the safe way): for every
+    exact facet normal ``a`` of S (both signs; enclosed in an interval vector ``[a]``),
+    an upper bound of ``h_Z(a)`` over ``[a]`` is at most a *lower* bound of ``h_S(a)``
+    (:meth:`~casadi_cmpc.Zonotope._facet_data`: ``hp_lo``, ``hm_lo``). S's outward-rounded
+    H-representation (``S.to_polytope()``) is never used: it contains S and would prove
+    inclusions in a slightly larger set. A flat S (rank < n) or one with too many facet
+    candidates proves no inclusion.
+
+    Disjointness: a direction ``d`` with ``min_Z d.x > h_S(d)``, the left side rounded down
+    and the right side up. The directions tried are the facet normals of S (intervals, both
+    signs), the coordinate axes and the facet normals of each element (float directions,
+    both signs); in 2-D these are all the candidates of the separating axis theorem.
+    """
+
+    def __init__(self, S: Zonotope) -> None:
+        self.S = S
+        self.n = S.dim
+        self.data = S._facet_data()
+        self.c = np.asarray(S.center, dtype=float)
+        G = np.asarray(S.generators, dtype=float)
+        self.G = G[:, np.any(G != 0.0, axis=0)]
+
+    def inside(self, C: np.ndarray, G: np.ndarray, R: np.ndarray) -> np.ndarray:
+        N = C.shape[0]
+        d = self.data
+        if d is None or N == 0:
+            return np.zeros(N, dtype=bool)
+        ok = np.ones(N, dtype=bool)
+        for Dlo, Dhi, bound in ((d["Nlo"], d["Nhi"], d["hp_lo"]),
+                                (-d["Nhi"], -d["Nlo"], d["hm_lo"])):
+            _, chi = _dot_center(C, Dlo, Dhi)
+            up = zn.add_up(chi, _spread_up(G, R, Dlo, Dhi))  # >= h_Z(a) for all a in [a]
+            with np.errstate(invalid="ignore"):
+                ok &= np.all(up <= bound[None, :], axis=1)
+        return ok
+
+    def _support_S_up(self, D: np.ndarray) -> np.ndarray:
+        """Upper bound of ``h_S(d)`` for float directions D of shape (N, k, n) -> (N, k)."""
+        N = D.shape[0]
+        C = np.broadcast_to(self.c, (N, self.n))
+        G = np.broadcast_to(self.G, (N,) + self.G.shape)
+        _, chi = _dot_center(C, D, D)
+        return zn.add_up(chi, _spread_up(G, np.zeros((N, self.n)), D, D))
+
+    def disjoint(self, C: np.ndarray, G: np.ndarray, R: np.ndarray) -> np.ndarray:
+        N = C.shape[0]
+        out = np.zeros(N, dtype=bool)
+        if N == 0:
+            return out
+        d = self.data
+        if d is not None:
+            for Dlo, Dhi, bound in ((d["Nlo"], d["Nhi"], d["hp_hi"]),
+                                    (-d["Nhi"], -d["Nlo"], d["hm_hi"])):
+                clo, _ = _dot_center(C, Dlo, Dhi)
+                low = zn.sub_dn(clo, _spread_up(G, R, Dlo, Dhi))  # <= min_Z a.x, all a
+                with np.errstate(invalid="ignore"):
+                    out |= np.any(low > bound[None, :], axis=1)
+        und = np.flatnonzero(~out)
+        if und.size == 0:
+            return out
+        Cu, Gu, Ru = C[und], G[und], R[und]
+        W = _facet_directions(Gu)
+        W = np.concatenate([W, -W], axis=1)  # (M, D, n) float directions
+        clo, _ = _dot_center(Cu, W, W)
+        low = zn.sub_dn(clo, _spread_up(Gu, Ru, W, W))
+        with np.errstate(invalid="ignore"):
+            sep = np.any(low > self._support_S_up(W), axis=1)
+        out[und[sep]] = True
+        return out
+
+
 def _box_rows(Y: Box) -> tuple[np.ndarray, np.ndarray]:
     n = Y.dim
     eye = np.eye(n)
@@ -544,7 +620,8 @@ def _box_rows(Y: Box) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Target:
-    """A target set Y: zonotope tests (polytopes, unions, boxes) and box tests (any set)."""
+    """A target set Y: zonotope tests (polytopes, unions, boxes, zonotopes) and box tests
+    (any set)."""
 
     def __init__(self, Y: Any, m: int, name: str = "Y") -> None:
         if isinstance(Y, Box):
@@ -556,6 +633,11 @@ class _Target:
             if Y.dim != m:
                 raise DimensionError(f"target {name} has dimension {Y.dim}; expected {m}")
             self.members = [_PolytopeTest(Y.A, Y.b)]
+            self.union = False
+        elif isinstance(Y, Zonotope):
+            if Y.dim != m:
+                raise DimensionError(f"target {name} has dimension {Y.dim}; expected {m}")
+            self.members = [_ZonotopeTest(Y)]
             self.union = False
         elif isinstance(Y, PolytopeUnion):
             if Y.dim != m:
@@ -767,7 +849,7 @@ def zonotope_classifier(f: Any, Y: Any, *, n: int | None = None, X: Any = None, 
         compiled :class:`~casadi_cmpc.interval.InclusionFunction` (evaluated as given where
         its kind is used; its Function gives the Jacobian); or a Model without inputs (e.g.
         ``model.closed_loop(K)``), robust over its disturbance box ``W``.
-    Y : Box, Polytope, PolytopeUnion or another set of dimension m
+    Y : Box, Polytope, PolytopeUnion, Zonotope or another set of dimension m
         The target.
     n : int, optional
         Dimension of ``Z`` (needed for the identity only).
@@ -971,7 +1053,7 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
         The initial admissible domain. A Polytope is bounded by a parallelotope (its
         Chebyshev centre as centre, SVD directions, §4.2.5) and ``x in X0`` is added as a
         condition.
-    Y : Box, Polytope, PolytopeUnion or another set of dimension m
+    Y : Box, Polytope, PolytopeUnion, Zonotope or another set of dimension m
         The target (a Box may have infinite bounds).
     eps : float
         Undecided zonotopes with ``Max(H) = max |h_ij| <= eps`` (4.12) are not bisected
@@ -1010,7 +1092,12 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
     ``h(a_i) <= b_i`` with support functions rounded upward (for a union: inside one
     member). OUTER: a row of the target, or a combination of the rows active at the vertex
     of the target that maximises a facet normal of the enclosure, separates them (see the
-    separating axis theorem: complete in 2-D up to rounding).
+    separating axis theorem: complete in 2-D up to rounding). A Zonotope target is tested
+    against its exact facet normals (interval enclosures): INNER needs an upper bound of
+    the enclosure's support below a *lower* bound of the target's support in every facet
+    normal; OUTER a facet normal of either zonotope (or an axis) along which the
+    enclosure's minimum, rounded down, exceeds the target's support, rounded up. Its
+    outward-rounded H-representation is never used for INNER (it contains the target).
 
     **Bisection** (Thm 4.1) along the first generator holding ``Max(H)``. The halves of a
     parallelotope share only a facet (Thm 4.2); for a zonotope with redundant generators
