@@ -127,6 +127,71 @@ class SetSequence:
     steps: list = field(default_factory=list)
 
     # ------------------------------------------------------------------ queries
+    def _index(self) -> Any:
+        """Per cell of the grid of all step boxes' bounds: the smallest step whose boxes
+        cover the cell, and one such box (built once; None without boxes)."""
+        idx = getattr(self, "_idx", None)
+        if idx is not None:
+            return idx if idx else None
+        boxes = [st.get("boxes") for st in self.steps]
+        if not boxes or any(b is None for b in boxes) or any(
+                st.get("polytope") is not None for st in self.steps):
+            self._idx = False
+            return None
+        allb = np.concatenate(boxes)
+        if allb.shape[0] == 0 or not np.isfinite(allb).all():
+            self._idx = False
+            return None
+        n = allb.shape[1]
+        edges = [np.unique(allb[:, j, :]) for j in range(n)]
+        shape = tuple(max(e.size - 1, 1) for e in edges)
+        if float(np.prod(shape, dtype=float)) > 4e6:
+            self._idx = False
+            return None
+        lev = np.full(shape, -1, dtype=np.int32)
+        box = np.full(shape, -1, dtype=np.int64)
+        for i in range(len(boxes), 0, -1):  # lower steps overwrite higher ones
+            B = boxes[i - 1]
+            a = [np.searchsorted(edges[j], B[:, j, 0]) for j in range(n)]
+            b = [np.searchsorted(edges[j], B[:, j, 1]) for j in range(n)]
+            for k in range(B.shape[0]):
+                sl = tuple(slice(a[j][k], b[j][k]) for j in range(n))
+                lev[sl] = i
+                box[sl] = k
+        self._idx = (edges, lev, box)
+        return self._idx
+
+    def _box_levels(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(level, box)`` per point from the step boxes (-1: in no box); a point on a
+        cell face takes the smallest level of the cells meeting there."""
+        edges, lev, box = self._idx
+        n = P.shape[1]
+        cand = []
+        for j in range(n):
+            e = edges[j]
+            i = np.searchsorted(e, P[:, j], side="right") - 1
+            inside = (P[:, j] >= e[0]) & (P[:, j] <= e[-1])
+            hi_i = np.clip(i, 0, e.size - 2)
+            lo_i = np.where((i >= 0) & (i < e.size) & (e[np.clip(i, 0, e.size - 1)] == P[:, j]),
+                            np.clip(i - 1, 0, e.size - 2), hi_i)
+            cand.append((lo_i, hi_i, inside))
+        best = np.full(P.shape[0], np.iinfo(np.int32).max, dtype=np.int64)
+        which = np.full(P.shape[0], -1, dtype=np.int64)
+        ok = np.ones(P.shape[0], dtype=bool)
+        for _, _, inside in cand:
+            ok &= inside
+        import itertools
+
+        for bits in itertools.product((0, 1), repeat=n):
+            ix = tuple(cand[j][bits[j]] for j in range(n))
+            lv = lev[ix].astype(np.int64)
+            bx = box[ix]
+            better = ok & (lv > 0) & (lv < best)
+            best = np.where(better, lv, best)
+            which = np.where(better, bx, which)
+        best = np.where(best == np.iinfo(np.int32).max, -1, best)
+        return best, which
+
     def level(self, x: Any) -> Any:
         """Smallest i with x in K_i, or None when x lies in no set of the sequence.
 
@@ -136,6 +201,13 @@ class SetSequence:
         batched = p.ndim == 2
         P = np.atleast_2d(p)
         out = np.full(P.shape[0], -1, dtype=int)
+        if self.sets and self._index() is not None:
+            inT = np.atleast_1d(np.asarray(self.sets[0].contains(P), dtype=bool))
+            lv, _ = self._box_levels(P)
+            out = np.where(inT, 0, lv).astype(int)
+            if batched:
+                return out
+            return None if out[0] < 0 else int(out[0])
         for i, S in enumerate(self.sets):
             und = np.flatnonzero(out < 0)
             if und.size == 0:
@@ -146,10 +218,30 @@ class SetSequence:
             return out
         return None if out[0] < 0 else int(out[0])
 
+    def locate(self, x: Any) -> tuple[int | None, tuple[int, np.ndarray] | None]:
+        """``(level(x), witness(x))`` of one point, sharing the look-up."""
+        p = np.asarray(x, dtype=float).reshape(1, -1)
+        if self._index() is None:
+            return self.level(p[0]), self.witness(p[0])
+        lv, bx = self._box_levels(p)
+        wit = None
+        if lv[0] >= 1:
+            wit = int(lv[0]), np.asarray(self.steps[lv[0] - 1]["witness"][bx[0]],
+                                         dtype=float).copy()
+        if bool(np.asarray(self.sets[0].contains(p[0]))):
+            return 0, wit
+        return (None if lv[0] < 0 else int(lv[0])), wit
+
     def witness(self, x: Any) -> tuple[int, np.ndarray] | None:
         """``(i, u)``: a stored proving control of a box first proven at step i that holds
         ``x`` (smallest i), or None (x in T or in no box, or no controls stored)."""
         p = np.asarray(x, dtype=float).reshape(-1)
+        if self._index() is not None:
+            lv, bx = self._box_levels(p[None])
+            if lv[0] < 1:
+                return None
+            return int(lv[0]), np.asarray(self.steps[lv[0] - 1]["witness"][bx[0]],
+                                          dtype=float).copy()
         for i, st in enumerate(self.steps, start=1):
             B = st.get("boxes")
             if B is None or B.shape[0] == 0:

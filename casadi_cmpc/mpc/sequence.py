@@ -115,6 +115,7 @@ class SetSequenceMPC:
                              if isinstance(M, Polytope))
         self._nlp = self._build(solver_options or {})
         self.last_info: dict[str, Any] = {}
+        self._xnext: np.ndarray | None = None
 
     # ---------------------------------------------------------------- solver
     def _build(self, opts: dict) -> Any:
@@ -127,18 +128,28 @@ class SetSequenceMPC:
         Hs = ca.SX.sym("H", r, n)
         hs = ca.SX.sym("h", r)
         f = model.function
-        g = []
+        g, costs = [], []
         Q, R = ca.DM(self.Q), ca.DM(self.R)
         for wv in self._w_vertices:
             xn = f(x, u, ca.DM(wv)) if model.l else f(x, u, ca.DM.zeros(0))
             e = xn - ca.DM(self.x_ref)
-            g.append(ca.mtimes([e.T, Q, e]) + ca.mtimes([u.T, R, u]) - t)
+            cost = ca.mtimes([e.T, Q, e]) + ca.mtimes([u.T, R, u])
+            costs.append(cost)
+            g.append(cost - t)
             if r:
                 g.append(ca.mtimes(Hs, xn) - hs)
         p = ca.vertcat(x, ca.vec(Hs), hs)
         nlp = {"x": ca.vertcat(u, t), "f": t, "g": ca.vertcat(*g), "p": p}
-        plugin, base = _solver_options(self.solver, opts)
+        # one control, a few constraints: a short iteration budget (the applied control is
+        # certified whatever the solver returns)
+        short = {"ipopt.max_iter": 50} if self.solver == "ipopt" else {
+            "max_iter": 10, "tol_du": 1e-6}
+        plugin, base = _solver_options(self.solver, {**short, **opts})
         self._ng = int(nlp["g"].numel())
+        wn = ca.DM(self._Wbox[:, 0] * 0.5 + self._Wbox[:, 1] * 0.5) if model.l else \
+            ca.DM.zeros(0)
+        self._costfun = ca.Function("cost", [x, u], [ca.mmax(ca.vertcat(*costs)),
+                                                      f(x, u, wn)])
         return ca.nlpsol("set_sequence_mpc", plugin, nlp, base)
 
     def _target(self, i: int) -> Any:
@@ -160,11 +171,10 @@ class SetSequenceMPC:
         return ok
 
     def _cost(self, x: np.ndarray, u: np.ndarray) -> float:
-        best = -np.inf
-        for wv in self._w_vertices:
-            xn = self.model.step(x, u, wv if self.model.l else None).reshape(-1) - self.x_ref
-            best = max(best, float(xn @ self.Q @ xn + u @ self.R @ u))
-        return best
+        """The cost's maximum over the vertices of W (the nominal w when not robust)."""
+        c, xn = self._costfun(x, u)
+        self._xnext = np.asarray(xn, dtype=float).reshape(-1)
+        return float(c)
 
     # ---------------------------------------------------------------- calls
     def __call__(self, x: Any) -> np.ndarray:
@@ -181,7 +191,10 @@ class SetSequenceMPC:
         model = self.model
         n, m = model.n, model.m
         x = float_vector(x, n, "x", None)
-        lvl = self.seq.level(x)
+        if hasattr(self.seq, "locate"):
+            lvl, wit = self.seq.locate(x)
+        else:
+            lvl, wit = self.seq.level(x), None
         nan_u = np.full(m, np.nan)
         stats: dict[str, Any] = {"solver": self.solver, "level": lvl}
         if lvl is None:
@@ -207,9 +220,9 @@ class SetSequenceMPC:
                               Status.PROVED, t0)
         # ---------------- one-step problem into K_{lvl - 1}
         ts = time.perf_counter()
-        u_opt = self._solve_nlp(x, lvl - 1, stats)
+        u0 = wit[1] if wit is not None else None
+        u_opt = self._solve_nlp(x, lvl - 1, stats, u0)
         stats["solve_time"] = time.perf_counter() - ts
-        wit = self.seq.witness(x) if hasattr(self.seq, "witness") else None
         u_w = None if wit is None else wit[1]
         cands = []
         if u_opt is not None:
@@ -246,7 +259,8 @@ class SetSequenceMPC:
                            {"candidates": int(C.shape[0]), "chosen": int(k[0])})
         return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc", Status.PROVED, t0)
 
-    def _solve_nlp(self, x: np.ndarray, j: int, stats: dict) -> np.ndarray | None:
+    def _solve_nlp(self, x: np.ndarray, j: int, stats: dict,
+                   u0: np.ndarray | None) -> np.ndarray | None:
         m, n, r = self.model.m, self.model.n, self._rmax
         H = np.zeros((r, n))
         h = np.ones(r)
@@ -260,7 +274,8 @@ class SetSequenceMPC:
         lbx = np.concatenate([self.model.U.lo, [-np.inf]])
         ubx = np.concatenate([self.model.U.hi, [np.inf]])
         try:
-            sol = self._nlp(x0=np.concatenate([self.model.U.mid, [0.0]]), p=p, lbx=lbx,
+            ug = self.model.U.mid if u0 is None else u0
+            sol = self._nlp(x0=np.concatenate([ug, [self._cost(x, ug) + 1.0]]), p=p, lbx=lbx,
                             ubx=ubx, lbg=-np.inf, ubg=0.0)
         except RuntimeError as exc:
             stats["return_status"] = str(exc)
@@ -278,8 +293,10 @@ class SetSequenceMPC:
         xp = np.full((2, model.n), np.nan)
         xp[0] = x
         if np.isfinite(u).all():
-            wn = self._Wbox[:, 0] * 0.5 + self._Wbox[:, 1] * 0.5 if model.l else None
-            xp[1] = model.step(x, u, wn).reshape(-1)
+            if self._xnext is None:
+                self._cost(x, u)
+            xp[1] = self._xnext
+        self._xnext = None
         self.last_info = {"status": "ok" if status == Status.PROVED else status.name.lower(),
                           "certificate": cert.label, "horizon": lvl, "mode": mode,
                           "solve_time": el}

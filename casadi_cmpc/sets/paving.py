@@ -928,10 +928,12 @@ class Paving(SetBase):
 
     def _grid(self, view: str, n_queries: int) -> _BoxGrid | None:
         """The exact grid index of a view (built once, for unions of 64 boxes or more)."""
-        U = self.view_boxes(view)
-        if U.shape[0] < 64 or n_queries < 8:
-            return None
         key = ("grid", str(view).lower())
+        if key in self._cache:
+            return self._cache[key]
+        U = self.view_boxes(view)
+        if U.shape[0] < 64:
+            return None
         if key not in self._cache:
             self._cache[key] = _BoxGrid.build(U)
         return self._cache[key]
