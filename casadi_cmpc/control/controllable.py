@@ -517,8 +517,9 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
         raise ValueError("certifying T with law= needs T as a Polytope")
     W = model.W if (robust and model.l) else (
         Box(model.W.mid, model.W.mid) if model.l else None)
-    for e in (0.01, 0.003, 0.001):  # finer pieces only while undecided
-        cert = certify_invariant(model, T, law, eps=min(eps, e), W=W, time_limit=60)
+    size = float(np.max(T.bounding_box().diam))
+    for e in (0.02, 0.005, 0.0015, 0.0005):  # finer pieces (relative to T) while undecided
+        cert = certify_invariant(model, T, law, eps=e * size, W=W, time_limit=60)
         if cert.proved is not None:
             break
     if cert.proved is not True:

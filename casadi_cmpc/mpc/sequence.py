@@ -146,6 +146,11 @@ class SetSequenceMPC:
             "max_iter": 10, "tol_du": 1e-6}
         plugin, base = _solver_options(self.solver, {**short, **opts})
         self._ng = int(nlp["g"].numel())
+        V = len(self._w_vertices)
+        lam = np.zeros(self._ng)
+        stride = 1 + r
+        lam[::stride] = 1.0 / V
+        self._lam0 = lam
         wn = ca.DM(self._Wbox[:, 0] * 0.5 + self._Wbox[:, 1] * 0.5) if model.l else \
             ca.DM.zeros(0)
         self._costfun = ca.Function("cost", [x, u], [ca.mmax(ca.vertcat(*costs)),
@@ -238,7 +243,10 @@ class SetSequenceMPC:
                               t0)
         C = np.asarray(cands, dtype=float).reshape(-1, m)
         tv = time.perf_counter()
-        ok = self._certify(x, C, lvl - 1)
+        ok = np.zeros(C.shape[0], dtype=bool)
+        ok[0] = self._certify(x, C[:1], lvl - 1)[0]  # the solver's control first
+        if not ok[0] and C.shape[0] > 1:
+            ok[1:] = self._certify(x, C[1:], lvl - 1)
         # the witness proves x's box into the target of its own step (a subset of K_{lvl-1})
         if u_w is not None and not ok[-1] and wit[0] <= lvl:
             ok[-1] = self._certify(x, C[-1:], wit[0] - 1)[0]
@@ -275,8 +283,10 @@ class SetSequenceMPC:
         ubx = np.concatenate([self.model.U.hi, [np.inf]])
         try:
             ug = self.model.U.mid if u0 is None else u0
-            sol = self._nlp(x0=np.concatenate([ug, [self._cost(x, ug) + 1.0]]), p=p, lbx=lbx,
-                            ubx=ubx, lbg=-np.inf, ubg=0.0)
+            # multipliers 1/V on the epigraph rows: a positive definite Hessian from the
+            # first iteration (with zero multipliers the Hessian in u vanishes)
+            sol = self._nlp(x0=np.concatenate([ug, [self._cost(x, ug)]]), p=p, lbx=lbx,
+                            ubx=ubx, lbg=-np.inf, ubg=0.0, lam_g0=self._lam0)
         except RuntimeError as exc:
             stats["return_status"] = str(exc)
             return None
