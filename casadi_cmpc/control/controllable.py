@@ -37,6 +37,7 @@ __all__ = ["one_step_set", "OneStepSet", "controllable_sets"]
 ROBUST = "exists u for all w"
 MODAL = "for all w exists u (u may depend on w)"
 NOMINAL = "exists u, w at its nominal value"
+NO_W = "exists u (no disturbance)"
 
 
 # ----------------------------------------------------------------------------- targets
@@ -291,7 +292,7 @@ def _w_setup(model: Model, robust: bool, w_points: Any) -> tuple[np.ndarray, np.
     """(W box for the inclusion test (l, 2), exclusion points (C, l), semantics)."""
     l = model.l
     if l == 0:
-        return np.zeros((0, 2)), np.zeros((1, 0)), ROBUST
+        return np.zeros((0, 2)), np.zeros((1, 0)), NO_W
     Wb = model.W.as_array()
     centre = np.clip(0.5 * Wb[:, 0] + 0.5 * Wb[:, 1], Wb[:, 0], Wb[:, 1])
     if not robust:
@@ -435,12 +436,12 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
         raise ValueError(f"unknown method '{method}'; valid methods: auto, general, modal")
     eps = positive_eps(eps)
     D = _domain(model, X)
+    obs = _as_obstacles(obstacles, model.n)
     if meth == "modal":
         return _modal(model, target, eps, D, robust, relative, max_boxes, time_limit,
-                      progress, options)
+                      progress, options, obs)
     if options:
         raise ValueError("options are for method='modal'")
-    obs = _as_obstacles(obstacles, model.n)
     T = _Target(model, target)
     scale = np.where(D.diam > 0, D.diam, 1.0) if relative else None
     r = _search(model, T, D.as_array()[None], eps, robust=robust, obstacles=obs,
@@ -459,7 +460,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
 
 def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative: bool,
            max_boxes: int, time_limit: float | None, progress: bool | None,
-           options: dict[str, Any] | None) -> OneStepSet:
+           options: dict[str, Any] | None, obstacles: list[Any]) -> OneStepSet:
     from ..solvers.quantified import quantified_sivia
 
     members = _flatten(target)
@@ -479,11 +480,27 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
             rows = ca.substitute(rows, model.w, ca.DM(c))
         g = ca.Function("target_rows", [model.x, model.u], [rows])
         Wb = None
-        sem = NOMINAL if model.l else ROBUST
+        sem = NOMINAL if model.l else NO_W
     Y = Box(np.full(A.shape[0], -np.inf), b)
     t0 = time.perf_counter()
     pav = quantified_sivia(g, D, model.U, Wb, Y, eps, options=options, relative=relative,
                            max_boxes=max_boxes, time_limit=time_limit, progress=progress)
+    if obstacles:
+        # inner boxes that may meet an obstacle are not proven members: undecided; boxes
+        # inside an obstacle are outside
+        I = pav.inner
+        meet = np.zeros(I.shape[0], dtype=bool)
+        buried = np.zeros(I.shape[0], dtype=bool)
+        for ob in obstacles:
+            meet |= np.asarray(ob.intersects_box(I), dtype=bool)
+            buried |= np.asarray(ob.contains_box(I), dtype=bool)
+        status, message, levels, ncl, npairs = (pav.status, pav.message, pav.levels,
+                                                pav.n_classified, pav.n_pairs)
+        pav = Paving(inner=I[~meet], boundary=np.concatenate([pav.boundary, I[meet & ~buried]]),
+                     outer=np.concatenate([pav.outer, I[buried]]), domain=D,
+                     n_discarded=pav.n_discarded + int(buried.sum()))
+        pav.status, pav.message, pav.levels, pav.n_classified, pav.n_pairs = (
+            status, message, levels, ncl, npairs)
     msg = (f"{pav.n_inner} state boxes proven ({sem}), {pav.n_boundary} undecided; "
            f"{pav.message}")
     return OneStepSet(status=pav.status, message=msg, method="modal (Alg 5.2)",
@@ -493,11 +510,19 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
 
 
 def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
-                    assume_invariant: bool, robust: bool, eps: float) -> Any:
+                    assume_invariant: bool, robust: bool, eps: float, X: Box) -> Any:
     """The certificate of T's invariance, or a clear error."""
     from ..solvers.result import Certificate
     from .invariance import certify_invariant
 
+    n = model.n
+    D = np.vstack([np.eye(n), -np.eye(n)])
+    up = T._support_upper(D) if not T.is_empty() and T.is_bounded() else np.full(2 * n,
+                                                                                 np.inf)
+    if not ((up[:n] <= X.hi).all() and (up[n:] <= -X.lo).all()):
+        raise ValueError("the terminal set must lie inside the state box X (proven with "
+                         "rigorous support bounds); intersect it with X and certify the "
+                         "intersection")
     if assume_invariant:
         return Certificate("assumed", None, "T is control invariant",
                            "assume_invariant=True: not proven; the sets are then inner "
@@ -606,7 +631,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     obs = _as_obstacles(obstacles, model.n)
     pts = None if until is None else np.atleast_2d(np.asarray(until, dtype=float))
     t0 = time.perf_counter()
-    cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps)
+    cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
     _, _, semantics = _w_setup(model, robust, w_points)
     seq = SetSequence(sets=[T], info={
         "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
