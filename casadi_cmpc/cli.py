@@ -1,11 +1,14 @@
 """The ``cmpc`` command line.
 
 ``cmpc run [EXAMPLE] [--out DIR]`` is the main job: it loads a thesis example (default
-``cannon_robust``), builds the controller the library has for it (the contractive MPC of
-thesis §4.3 configured in ``example.info["mpc"]``, with its local law inside the terminal set
-where the example has one), simulates the closed loop from the thesis' initial states, checks
-the constraints itself, and prints a summary. With ``--out DIR`` it writes the figures (PNG),
-``summary.json`` and ``report.txt``.
+``cannon_robust``) and builds the controller the library has for it. For the examples with
+controllable sets (``example.info["sequence"]``: E8, E9, E10, E14) that is the full pipeline:
+certify the terminal set, compute (or load from the cache) the sequence of (robust)
+controllable sets, and run the dual-mode one-step MPC along it, every control certified. For
+the others (or with ``--controller contractive``) it is the contractive MPC of thesis §4.3
+configured in ``example.info["mpc"]``. It simulates the closed loop from the thesis' initial
+states, checks the constraints itself, and prints a summary. With ``--out DIR`` it writes the
+figures (PNG), ``summary.json`` and ``report.txt``.
 
 ``cmpc list`` prints the example names.
 """
@@ -52,10 +55,90 @@ def _obstacle_distances(traj: Any, run: dict) -> np.ndarray | None:
     return d.min(axis=1)
 
 
-def _controller(ex: Any) -> Any:
+def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
+    """A file name that changes with the model, T, the law and the settings."""
+    import hashlib
+    import os
+
+    from . import __version__
+
+    h = hashlib.sha256()
+    for part in (ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
+                 np.asarray(ex.terminal.b).tobytes(), np.asarray(ex.local_law).tobytes(),
+                 repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
+                 __version__):
+        h.update(part if isinstance(part, bytes) else str(part).encode())
+    base = Path(cache) if cache else Path(os.environ.get(
+        "XDG_CACHE_HOME", Path.home() / ".cache")) / "casadi_cmpc"
+    return base / f"{ex.name}-{h.hexdigest()[:16]}.npz"
+
+
+def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> Any:
+    from .control.controllable import controllable_sets
+    from .control.linear_sets import SetSequence
+    from .mpc.sequence import SetSequenceMPC
+
+    cfg = ex.info["sequence"]
+    path = _cache_path(ex, cfg, cache)
+    seq = None
+    if path.is_file():
+        try:
+            seq = SetSequence.load(path)
+            print(f"sequence loaded from the cache {path}")
+        except (ValueError, TypeError, KeyError, OSError) as exc:
+            print(f"cache {path} unreadable ({exc}); computing the sequence again")
+            seq = None
+    if seq is None:
+        t0 = time.perf_counter()
+        seq = controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=cfg["robust"],
+                                law=ex.local_law, progress=progress)
+        print(f"sequence computed in {time.perf_counter() - t0:.1f} s")
+        try:
+            seq.save(path)
+            print(f"  cached in {path}")
+        except OSError as exc:
+            print(f"  not cached ({exc})")
+    print(f"terminal set: {seq.info.get('terminal_certificate')} invariant under the local "
+          f"law; sequence: {seq!r}, {len(seq) - 1} steps, eps = {seq.info.get('eps')}, "
+          f"{seq.info.get('semantics')}")
+    ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
+                          local_law=ex.local_law, solver=cfg.get("solver", "ipopt"),
+                          robust=cfg["robust"])
+    return ctrl, seq
+
+
+def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
+                progress: bool | None = None) -> tuple[Any, Any]:
+    """The controller of an example and its set sequence (None for the contractive MPC)."""
     from .mpc.contractive import ContractiveMPC
 
-    return ContractiveMPC(ex.model, **ex.info["mpc"])
+    if kind == "sequence" and "sequence" not in ex.info:
+        raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
+                         "--controller contractive")
+    if kind in ("auto", "sequence") and "sequence" in ex.info:
+        return _sequence_controller(ex, cache, progress)
+    return ContractiveMPC(ex.model, **ex.info["mpc"]), None
+
+
+def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.0, 5.6))
+    seq.plot(ax=ax)
+    for i, traj in enumerate(trajs, start=1):
+        ax.plot(traj.x[:, 0], traj.x[:, 1], "o-", color="r" if i == 1 else f"C{i}", ms=3,
+                lw=1.2, label=f"closed loop from {np.round(traj.x[0], 3).tolist()}")
+    names = ex.info.get("state_names")
+    if names:
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+    ax.legend(fontsize=8, loc="best")
+    ax.set_title(f"{ex.name}: controllable sets K_i and closed loops "
+                 f"({ex.info.get('example', '')})")
+    path = out / "sets.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path.name
 
 
 def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
@@ -112,7 +195,7 @@ def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
 
 
 def _run(name: str, out: str | None, steps: int | None, seed: int,
-         progress: bool | None) -> int:
+         progress: bool | None, controller: str = "auto", cache: str | None = None) -> int:
     from . import models
     from .mpc.simulate import simulate
 
@@ -134,8 +217,14 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
             return 2
     print(model.summary())
     t_build = time.perf_counter()
-    ctrl = _controller(ex)
+    try:
+        ctrl, seq = _controller(ex, controller, cache, progress)
+    except ValueError as exc:
+        print(f"cmpc: {exc}", file=sys.stderr)
+        return 2
     t_build = time.perf_counter() - t_build
+    if seq is not None:
+        run["note"] = ex.info["sequence"].get("note", run.get("note", ""))
     print(f"\ncontroller: {ctrl!r}")
     if run.get("note"):
         print(f"  {run['note']}")
@@ -184,10 +273,19 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
                "controller": repr(ctrl), "note": run.get("note", ""),
                "controller_build_time": t_build, "steps": n_steps, "seed": seed,
                "runs": runs, "total_violations": total_viol}
+    if seq is not None:
+        summary["sequence"] = {"steps": len(seq) - 1, "converged_at": seq.converged_at,
+                               "status": seq.status, "eps": seq.info.get("eps"),
+                               "semantics": seq.info.get("semantics"),
+                               "terminal_certificate": seq.info.get("terminal_certificate"),
+                               "seconds": seq.info.get("seconds"),
+                               "levels_x0": [seq.level(r["x0"]) for r in runs]}
     if out:
         d = Path(out)
         d.mkdir(parents=True, exist_ok=True)
         figs = _figures(ex, trajs, run, d)
+        if seq is not None and ex.model.n >= 2:
+            figs.append(_sequence_figure(ex, seq, trajs, d))
         summary["figures"] = figs
         (d / "summary.json").write_text(json.dumps(_jsonable(summary), indent=2))
         (d / "report.txt").write_text(_report(ex, ctrl, summary))
@@ -245,6 +343,13 @@ def main(argv: list[str] | None = None) -> int:
                        help="closed-loop steps per initial state (default: the example's)")
     p_run.add_argument("--seed", type=int, default=0, help="seed of the disturbances")
     p_run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p_run.add_argument("--controller", choices=("auto", "sequence", "contractive"),
+                       default="auto",
+                       help="'sequence': one-step MPC along controllable sets (default for "
+                            "the examples that have them), 'contractive': contractive MPC")
+    p_run.add_argument("--cache", default=None,
+                       help="directory of cached set sequences (default: "
+                            "$XDG_CACHE_HOME/casadi_cmpc or ~/.cache/casadi_cmpc)")
     sub.add_parser("list", help="list the example names")
     args = parser.parse_args(argv)
     if args.command == "list":
@@ -257,7 +362,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.steps is not None and args.steps < 1:
         parser.error("--steps must be at least 1")
     return _run(args.example, args.out, args.steps, args.seed,
-                False if args.no_progress else None)
+                False if args.no_progress else None, args.controller, args.cache)
 
 
 if __name__ == "__main__":  # pragma: no cover

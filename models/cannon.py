@@ -32,6 +32,9 @@ def build() -> Example:
                     "local_set": cannon_terminal()},
             "run": {"steps": 60, "note": "contractive MPC (N = 10, alpha = 0.9), then u = K x "
                     "inside T"},
+            "sequence": {"eps": 0.05, "robust": False, "Q": np.eye(2), "R": np.eye(1),
+                         "note": "one-step MPC along the controllable sets (Alg 4.7), then "
+                                 "u = K x inside T"},
             "section": "4.4.4",
             "equation": "(4.28), terminal (4.29)",
             "figures": ["4.12", "4.13", "4.14", "4.15"],

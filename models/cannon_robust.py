@@ -31,10 +31,13 @@ def build() -> Example:
             "mpc": {"horizon": 10, "alpha": 0.9, "local_law": K_CANNON.copy(),
                     "local_set": cannon_terminal()},
             "run": {"steps": 60, "disturbance": "uniform",
-                    "note": "certified robust controllable sets are not built yet: the nominal "
-                            "contractive MPC (mu = 0.9 in the prediction) runs with mu drawn "
+                    "note": "nominal contractive MPC (mu = 0.9 in the prediction) with mu drawn "
                             "uniformly in [0.85, 0.95] at each step; its certificates hold for "
                             "the nominal mu only"},
+            "sequence": {"eps": 0.05, "robust": True, "Q": np.eye(2), "R": np.eye(1),
+                         "note": "robust one-step MPC along the robust controllable sets "
+                                 "(Alg 5.4), mu drawn uniformly in [0.85, 0.95] at each step; "
+                                 "every control certified for all mu; u = K x inside T"},
             "section": "5.2.5",
             "equation": "(5.22), terminal (5.23)",
             "figures": ["5.3", "5.4", "5.5", "5.6"],

@@ -34,6 +34,10 @@ def build() -> Example:
                     "note": "nominal contractive MPC (mu = 0.85 in the prediction), mu drawn "
                             "uniformly in [0.75, 0.95] at each step; certificates hold for the "
                             "nominal mu only"},
+            "sequence": {"eps": 0.05, "robust": True, "Q": np.eye(2), "R": np.eye(1),
+                         "note": "robust one-step MPC along the robust controllable sets "
+                                 "(Alg 6.3), mu drawn uniformly in [0.75, 0.95] at each step; "
+                                 "every control certified for all mu; u = K x inside T"},
             "section": "6.1.6",
             "equation": "(6.9), terminal (6.10)",
             "figures": ["6.2", "6.3", "6.4", "6.5"],

@@ -129,6 +129,9 @@ def build() -> Example:
             "example": "E6, E14",
             "mpc": {"horizon": 10, "alpha": 0.9, "x_ref": x_eq, "u_ref": np.zeros(1),
                     "local_law": K_LOCAL.copy(), "local_set": Polytope(H_TERMINAL, B_TERMINAL)},
+            "sequence": {"eps": 0.002, "robust": False,
+                         "note": "one-step MPC along the controllable sets (§7.2), then "
+                                 "u = K x inside (7.10)"},
             "run": {"steps": 100, "note": "contractive MPC towards the exact equilibrium of "
                     "the Euler model (8e-5 from the origin of the scaled coordinates, whose "
                     "printed parameters are rounded), then u = K (x - x_eq) inside (7.10)"},

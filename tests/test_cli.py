@@ -11,14 +11,33 @@ from casadi_cmpc.cli import main
 STEPS = {"mirosot": 4, "cannon_001": 4}
 
 
+SEQUENCE_EXAMPLES = [n for n in cm.models.names() if "sequence" in cm.models.load(n).info]
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One cache of set sequences for the module (each sequence is computed once)."""
+    return str(tmp_path_factory.mktemp("cmpc_cache"))
+
+
+def test_the_set_pipeline_covers_e8_e9_e10_e14():
+    assert SEQUENCE_EXAMPLES == ["cstr", "cannon", "cannon_robust", "cannon_robust_wide"]
+
+
+@pytest.mark.parametrize("controller", ["auto", "contractive"])
 @pytest.mark.parametrize("name", cm.models.names())
-def test_run_every_listed_example(name, tmp_path, capsys):
-    """Every example that ``cmpc list`` shows runs, exits 0 and writes its outputs."""
+def test_run_every_listed_example(name, controller, tmp_path, capsys, cache):
+    """Every example that ``cmpc list`` shows runs with each controller it has, exits 0 and
+    writes its outputs."""
+    if controller == "contractive" and name not in SEQUENCE_EXAMPLES:
+        pytest.skip("'auto' is the contractive MPC for this example")
     steps = STEPS.get(name, 6)
     assert main(["run", name, "--out", str(tmp_path), "--steps", str(steps),
-                 "--no-progress"]) == 0
+                 "--no-progress", "--controller", controller, "--cache", cache]) == 0
     text = capsys.readouterr().out
-    assert "controller: ContractiveMPC" in text and "violations: state 0, input 0" in text
+    kind = ("SetSequenceMPC" if name in SEQUENCE_EXAMPLES and controller == "auto"
+            else "ContractiveMPC")
+    assert f"controller: {kind}" in text and "violations: state 0, input 0" in text
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["example"] == name and summary["total_violations"] == 0
     ex = cm.models.load(name)
@@ -34,22 +53,48 @@ def test_run_every_listed_example(name, tmp_path, capsys):
     for f in summary["figures"]:
         assert (tmp_path / f).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "phase_plane.png" in summary["figures"]
+    if kind == "SetSequenceMPC":
+        assert "sets.png" in summary["figures"]
+        seq = summary["sequence"]
+        assert seq["terminal_certificate"] == "proved" and seq["status"] == "converged"
+        assert all(lv is not None and lv >= 0 for lv in seq["levels_x0"])
     report = (tmp_path / "report.txt").read_text()
     assert name in report and "violations counted by the simulator" in report
 
 
-def test_default_example_is_cannon_robust_and_says_what_it_runs(tmp_path, capsys):
-    assert main(["run", "--steps", "3", "--no-progress"]) == 0
+def test_default_example_is_the_robust_set_pipeline_and_says_what_it_runs(capsys, cache):
+    assert main(["run", "--steps", "3", "--no-progress", "--cache", cache]) == 0
     out = capsys.readouterr().out
-    assert "cannon_robust" in out
-    assert "nominal" in out and "uniform" in out  # says it runs the nominal MPC
+    assert "cannon_robust" in out and "SetSequenceMPC" in out
+    assert "proved invariant" in out and "exists u for all w" in out
+    assert "certified for all mu" in out and "uniform" in out
+    # the second run loads the cached sequence
+    assert main(["run", "--steps", "3", "--no-progress", "--cache", cache]) == 0
+    assert "loaded from the cache" in capsys.readouterr().out
 
 
-def test_closed_loop_of_default_example_reaches_the_origin(tmp_path):
-    assert main(["run", "--out", str(tmp_path), "--no-progress"]) == 0
-    r = json.loads((tmp_path / "summary.json").read_text())["runs"][0]
+def test_closed_loop_of_default_example_reaches_the_origin(tmp_path, cache):
+    assert main(["run", "--out", str(tmp_path), "--no-progress", "--cache", cache]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    r = summary["runs"][0]
     assert r["final_distance_to_reference"] < 1e-2
     assert r["violations"] == {"state": 0, "input": 0}
+    # every step certified: the robust one-step control or the local law in T
+    assert set(r["certificates"]) <= {"verified", "local_law"}
+    assert r["certificates"].get("verified", 0) >= 10
+
+
+def test_a_corrupt_cache_is_recomputed(tmp_path, capsys):
+    from casadi_cmpc.cli import _cache_path
+
+    ex = cm.models.load("cannon")
+    path = _cache_path(ex, ex.info["sequence"], str(tmp_path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"not a sequence")
+    assert main(["run", "cannon", "--steps", "2", "--no-progress", "--cache",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "unreadable" in out and "sequence computed" in out
 
 
 def test_run_unknown_example_fails_cleanly(capsys):

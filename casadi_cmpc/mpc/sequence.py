@@ -114,6 +114,7 @@ class SetSequenceMPC:
             self._rmax = max(M.A.shape[0] for S in sets for M in _members(S)
                              if isinstance(M, Polytope))
         self._nlp = self._build(solver_options or {})
+        self.contract = np.eye(n)  # the whole state is driven to x_ref (for reports)
         self.last_info: dict[str, Any] = {}
         self._xnext: np.ndarray | None = None
 
@@ -180,6 +181,14 @@ class SetSequenceMPC:
         c, xn = self._costfun(x, u)
         self._xnext = np.asarray(xn, dtype=float).reshape(-1)
         return float(c)
+
+    def __repr__(self) -> str:
+        return (f"SetSequenceMPC(model='{self.model.name}', sets={len(self.seq)}, "
+                f"solver='{self.solver}', robust={self.robust})")
+
+    def reset(self) -> None:
+        """Forget the previous call (the controller keeps no state between calls)."""
+        self.last_info = {}
 
     # ---------------------------------------------------------------- calls
     def __call__(self, x: Any) -> np.ndarray:
