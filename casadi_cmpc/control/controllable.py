@@ -30,7 +30,7 @@ from ..sets.union import SetUnion
 from ..sets.zonotope import Zonotope
 from ..solvers._common import positive_eps
 from ..solvers.engine import INNER, OUTER, PairFrontier, Status, branch_and_bound
-from ..solvers.result import Result
+from ..solvers.result import SetResult
 
 __all__ = ["one_step_set", "OneStepSet", "controllable_sets"]
 
@@ -221,14 +221,18 @@ class _OneStepClassifier:
 
 # ----------------------------------------------------------------------------- results
 @dataclass(frozen=True, eq=False, kw_only=True, repr=False)
-class OneStepSet(Result):
+class OneStepSet(SetResult):
     """Inner approximation of a one-step (robust) controllable set, with proving controls.
+
+    A :class:`~casadi_cmpc.SetResult`: it acts as its paving (``res.inner``,
+    ``res.boundary``, ``res.outside``, ...), except for :meth:`contains`, :meth:`area` and
+    :meth:`plot` below.
 
     Attributes
     ----------
     paving : Paving
         ``inner``: state boxes proven in the set; ``boundary``: undecided boxes;
-        ``outer``: boxes proven outside it (for drawing).
+        ``outside``: boxes proven outside it (for drawing).
     witness : ndarray (N_inner, m) or None
         For the ``general`` method, a control proving each inner box: ``f(x, witness, w)``
         lies in the target for every x of the box and every w of W (``None`` for the
@@ -242,24 +246,14 @@ class OneStepSet(Result):
         BUDGET when a limit stopped it.
     """
 
-    paving: Paving
     witness: np.ndarray | None = None
     semantics: str = ROBUST
     target: Any = None
-    n_pairs: int = 0
 
     def _repr_parts(self) -> list[str]:
         p = self.paving
         return [f"inner={p.n_inner}", f"boundary={p.n_boundary}",
                 f"semantics={self.semantics!r}"]
-
-    @property
-    def inner(self) -> np.ndarray:
-        return self.paving.inner
-
-    @property
-    def boundary(self) -> np.ndarray:
-        return self.paving.boundary
 
     def area(self, view: str = "inner") -> float:
         """Area (volume) of the inner boxes (``view="outer"``: inner and boundary)."""
@@ -448,7 +442,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
                 u_eps=float(u_eps), max_cells=int(max_cells), w_points=w_points,
                 x_scale=scale, max_boxes=max_boxes, time_limit=time_limit,
                 progress=progress, desc="one-step set")
-    pav = Paving(inner=r["inner"], boundary=r["boundary"], outer=r["outer"], domain=D,
+    pav = Paving(inner=r["inner"], boundary=r["boundary"], outside=r["outer"], domain=D,
                  n_discarded=r["n_discarded"])
     msg = (f"{pav.n_inner} state boxes proven ({r['semantics']}), {pav.n_boundary} "
            f"undecided; {r['message']}")
@@ -497,7 +491,7 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
         status, message, levels, ncl, npairs = (pav.status, pav.message, pav.levels,
                                                 pav.n_classified, pav.n_pairs)
         pav = Paving(inner=I[~meet], boundary=np.concatenate([pav.boundary, I[meet & ~buried]]),
-                     outer=np.concatenate([pav.outer, I[buried]]), domain=D,
+                     outside=np.concatenate([pav.outside, I[buried]]), domain=D,
                      n_discarded=pav.n_discarded + int(buried.sum()))
         pav.status, pav.message, pav.levels, pav.n_classified, pav.n_pairs = (
             status, message, levels, ncl, npairs)

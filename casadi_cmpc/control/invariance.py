@@ -328,12 +328,12 @@ def _certify(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W: Any
     }
     unresolved = []
     for name, pav in runs.items():
-        bad = ~_disjoint(pav.outer, S) if len(pav.outer) else np.zeros(0, dtype=bool)
+        bad = ~_disjoint(pav.outside, S) if len(pav.outside) else np.zeros(0, dtype=bool)
         details[name] = {"inner": len(pav.inner), "boundary": len(pav.boundary),
                          "outside": int(pav.n_discarded), "status": pav.status.name,
                          "seconds": pav.elapsed}
         if bad.any():
-            unresolved.append((name, pav.outer, bad, True))
+            unresolved.append((name, pav.outside, bad, True))
         if len(pav.boundary):
             meet = ~_disjoint(pav.boundary, S)
             if meet.any():

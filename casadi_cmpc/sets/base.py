@@ -18,7 +18,7 @@ and inherits ``plot(ax=None, **kw)`` (2-D drawing; ``dims=(i, j)`` projects high
 from __future__ import annotations
 
 import json
-from abc import ABC, abstractmethod
+from abc import ABCMeta, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -30,7 +30,42 @@ _TYPES: dict[str, type[SetBase]] = {}
 _FORMAT_VERSION = 1
 
 
-class SetBase(ABC):
+class HoldsSetMeta(ABCMeta):
+    """Metaclass of the set types: an object that *holds* a set counts as an instance of it.
+
+    A class whose attribute ``_held_set`` names one of its instance attributes (e.g. a
+    solver's :class:`~casadi_cmpc.SetResult`, ``_held_set = "paving"``) wraps a set and
+    forwards its members to it. ``isinstance(obj, T)`` is then True when the held object is
+    an instance of ``T``, so code written for the set a solver used to return (``if
+    isinstance(x, cm.Paving)``) keeps accepting the result. ``issubclass`` is unchanged.
+    """
+
+    def __instancecheck__(cls, instance: Any) -> bool:
+        if ABCMeta.__instancecheck__(cls, instance):
+            return True
+        attr = getattr(type(instance), "_held_set", None)
+        if not isinstance(attr, str):
+            return False
+        try:
+            held = object.__getattribute__(instance, attr)
+        except AttributeError:
+            return False
+        return held is not instance and isinstance(held, cls)
+
+
+def held_set(obj: Any) -> Any:
+    """The set an object holds (see :class:`HoldsSetMeta`, e.g. a solver result's paving), or
+    the object itself."""
+    attr = getattr(type(obj), "_held_set", None)
+    if isinstance(attr, str):
+        try:
+            return object.__getattribute__(obj, attr)
+        except AttributeError:
+            pass
+    return obj
+
+
+class SetBase(metaclass=HoldsSetMeta):
     """Abstract base of the set types (see the module docstring for the protocol)."""
 
     _type_name: ClassVar[str] = ""

@@ -1,11 +1,11 @@
-"""Batched box helpers and pavings (finite unions of boxes labelled inner / boundary / outer).
+"""Batched box helpers and pavings (finite unions of boxes labelled inner / boundary / outside).
 
 A batch of boxes is a float array of shape ``(N, n, 2)``: ``[..., 0]`` lower bounds,
 ``[..., 1]`` upper bounds. The helpers of this module work on whole batches at once.
 
 A :class:`Paving` is what set inversion (SIVIA, thesis §4.1.2, Alg. 4.1) returns: the boxes of
 the initial domain sorted into ``inner`` (proven inside the target set), ``boundary``
-(undecided at the resolution ``eps``) and ``outer`` (proven outside, discarded).
+(undecided at the resolution ``eps``) and ``outside`` (proven outside, discarded).
 
 Examples
 --------
@@ -27,6 +27,7 @@ True
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,7 +35,7 @@ import numpy as np
 
 from .._validate import as_boxes, as_points
 from ..exceptions import DimensionError, EmptySetError, InvalidBoundsError, UnboundedSetError
-from .base import SetBase
+from .base import SetBase, held_set
 from .box import Box
 
 __all__ = [
@@ -52,8 +53,27 @@ _BISECTION_RULES = ("widest",)
 _VIEWS = ("outer", "inner", "boundary", "outside")
 # largest number of (box, box) pairs examined in one vectorised step
 _PAIR_BUDGET = 1 << 18
-_DEFAULT_COLORS = {"inner": "#6abf69", "boundary": "#ffe066", "outer": "#c9d6e3"}
-_DEFAULT_LABELS = {"inner": "inner", "boundary": "boundary", "outer": "outside"}
+_DEFAULT_COLORS = {"inner": "#6abf69", "boundary": "#ffe066", "outside": "#c9d6e3"}
+_DEFAULT_LABELS = {"inner": "inner", "boundary": "boundary", "outside": "outside"}
+
+
+def _warn_outer(what: str, stacklevel: int = 3) -> None:
+    """The DeprecationWarning of the old name ``outer`` of the proven-outside boxes."""
+    warnings.warn(
+        f"{what} is deprecated: the proven-outside boxes are now called 'outside' (the "
+        "view 'outer' is inner ∪ boundary, the outer approximation); use 'outside'",
+        DeprecationWarning, stacklevel=stacklevel)
+
+
+def _outside_keyword(outside: Any, outer: Any, what: str) -> Any:
+    """``outside``, or the deprecated keyword ``outer`` (with a warning); not both."""
+    if outer is None:
+        return outside
+    _warn_outer(f"the keyword outer= of {what}", stacklevel=4)
+    if outside is not None:
+        raise TypeError(f"{what} got both outside= and its deprecated alias outer=; "
+                        "pass outside= only")
+    return outer
 
 
 # ============================================================== batched box helpers
@@ -538,6 +558,7 @@ class _BoxGrid:
         for j in range(n):
             cover = np.cumsum(cover, axis=j)
         covered = (cover[tuple(slice(0, s) for s in shape)] > 0).astype(np.int64)
+        self.covered = covered.astype(bool)
         table = np.zeros(tuple(s + 1 for s in shape), dtype=np.int64)
         inner = covered
         for j in range(n):
@@ -545,6 +566,39 @@ class _BoxGrid:
         table[tuple(slice(1, None) for _ in shape)] = inner
         self.table = table
         return self
+
+    def polytope_inside(self, P: Any) -> bool:
+        """Proven ``P ⊆ union`` for a bounded polytope P: P's rigorous bounding box lies in
+        the grid and every uncovered cell meeting that box is proven disjoint from P
+        (``P.intersects_box`` answers False only with a proof). False: not proven (a P that
+        touches an uncovered cell on a face is not proven either)."""
+        n = len(self.edges)
+        if P.is_empty():
+            return True
+        if not P.is_bounded():
+            return False
+        D = np.vstack([np.eye(n), -np.eye(n)])
+        up = P._support_upper(D)
+        hi, lo = up[:n], -up[n:]
+        i0, i1 = [], []
+        for j in range(n):
+            e = self.edges[j]
+            if not (lo[j] >= e[0] and hi[j] <= e[-1]) or e.size < 2:
+                return False
+            a = max(int(np.searchsorted(e, lo[j], side="left")) - 1, 0)
+            b = min(int(np.searchsorted(e, hi[j], side="right")), e.size - 1)
+            i0.append(a)
+            i1.append(max(b, a + 1))
+        block = self.covered[tuple(slice(a, b) for a, b in zip(i0, i1, strict=True))]
+        idx = np.argwhere(~block)
+        if idx.shape[0] == 0:
+            return True
+        cells = np.empty((idx.shape[0], n, 2))
+        for j in range(n):
+            k = idx[:, j] + i0[j]
+            cells[:, j, 0] = self.edges[j][k]
+            cells[:, j, 1] = self.edges[j][k + 1]
+        return not bool(np.asarray(P.intersects_box(cells), dtype=bool).any())
 
     def _count(self, i0: list[np.ndarray], i1: list[np.ndarray]) -> np.ndarray:
         """Covered cells in the index blocks ``i0[j] <= i < i1[j]`` (empty blocks give 0)."""
@@ -691,18 +745,21 @@ class Paving(SetBase):
         Boxes proven inside the target set (SIVIA's Σ).
     boundary : array_like, shape (N_b, n, 2), or Box, or list of Box, optional
         Undecided boxes, narrower than the resolution ``eps`` (SIVIA's Σ^b).
-    outer : array_like, shape (N_o, n, 2), or Box, or list of Box, optional
+    outside : array_like, shape (N_o, n, 2), or Box, or list of Box, optional
         Boxes proven outside the target set (discarded). A solver may keep them to draw the
         complement, or drop them and only count them in ``n_discarded``.
     domain : Box or array_like, shape (n, 2), optional
         The initial box the paving was built from; every box must lie in it.
     n_discarded : int, optional
-        Number of boxes discarded as proven outside; defaults to ``len(outer)``.
+        Number of boxes discarded as proven outside; defaults to ``len(outside)``.
+    outer : deprecated
+        Old name of ``outside`` (keyword only; emits a DeprecationWarning).
 
     Attributes
     ----------
-    inner, boundary, outer : ndarray, shape (N, n, 2)
-        Read-only arrays (possibly with ``N = 0``).
+    inner, boundary, outside : ndarray, shape (N, n, 2)
+        Read-only arrays (possibly with ``N = 0``). ``outer`` is a deprecated alias of
+        ``outside`` (it emits a DeprecationWarning).
     domain : Box or None
     n_discarded : int
 
@@ -727,10 +784,11 @@ class Paving(SetBase):
     ``"boundary"``
         ``boundary`` only.
     ``"outside"``
-        the ``outer`` boxes: every point of them is proven outside the target set.
+        the ``outside`` boxes: every point of them is proven outside the target set.
 
-    Beware the two meanings of "outer": the *attribute* ``outer`` holds the discarded boxes
-    (view ``"outside"``), while the *view* ``"outer"`` is the outer approximation.
+    The *view* ``"outer"`` is the outer approximation; the discarded boxes are the attribute
+    and view ``outside`` (the attribute was called ``outer`` before, a name kept as a
+    deprecated alias).
     :meth:`inner_set` and :meth:`outer_set` return the two approximations as pavings of
     their own.
 
@@ -749,8 +807,10 @@ class Paving(SetBase):
     (True, False)
     """
 
-    def __init__(self, inner: Any = None, boundary: Any = None, outer: Any = None,
-                 domain: Any = None, *, n_discarded: int | None = None) -> None:
+    def __init__(self, inner: Any = None, boundary: Any = None, outside: Any = None,
+                 domain: Any = None, *, n_discarded: int | None = None,
+                 outer: Any = None) -> None:
+        outside = _outside_keyword(outside, outer, "Paving()")
         if domain is not None:
             if not isinstance(domain, Box):
                 d = np.asarray(domain, dtype=float)
@@ -759,7 +819,7 @@ class Paving(SetBase):
                 domain = Box.from_array(d)
         n = domain.dim if domain is not None else None
         arrays = {}
-        for name, data in (("inner", inner), ("boundary", boundary), ("outer", outer)):
+        for name, data in (("inner", inner), ("boundary", boundary), ("outside", outside)):
             if data is not None:
                 arrays[name] = _box_array(data, n, name)
                 n = arrays[name].shape[1]
@@ -767,7 +827,7 @@ class Paving(SetBase):
             raise DimensionError(
                 "Paving needs its dimension: give a domain Box or at least one box array "
                 "(an empty array of shape (0, n, 2) is fine)")
-        for name in ("inner", "boundary", "outer"):
+        for name in ("inner", "boundary", "outside"):
             if name not in arrays:
                 arrays[name] = _box_array(np.zeros((0, n, 2)), n, name)
         if domain is not None:
@@ -778,31 +838,40 @@ class Paving(SetBase):
                     raise InvalidBoundsError(
                         f"{name} box {i} = {arr[i].tolist()} is not inside the domain {domain}")
         if n_discarded is None:
-            n_discarded = arrays["outer"].shape[0]
+            n_discarded = arrays["outside"].shape[0]
         if int(n_discarded) != n_discarded or n_discarded < 0:
             raise ValueError(f"n_discarded must be a non-negative integer; got {n_discarded!r}")
         self._n = int(n)
         self.inner: np.ndarray = arrays["inner"]
         self.boundary: np.ndarray = arrays["boundary"]
-        self.outer: np.ndarray = arrays["outer"]
+        self.outside: np.ndarray = arrays["outside"]
         self.domain: Box | None = domain
         self.n_discarded = int(n_discarded)
         self._cache: dict[str, Any] = {}
 
     @classmethod
-    def _from_solver(cls, inner: np.ndarray, boundary: np.ndarray, outer: np.ndarray,
+    def _from_solver(cls, inner: np.ndarray, boundary: np.ndarray, outside: np.ndarray,
                      domain: Box, n_discarded: int) -> Paving:
         """A paving from boxes a solver produced by bisecting ``domain``: float arrays of
         shape (N, n, 2) with lo <= hi, each box inside the domain, so no checks are made."""
         self = cls.__new__(cls)
-        for arr in (inner, boundary, outer):
+        for arr in (inner, boundary, outside):
             arr.setflags(write=False)
         self._n = domain.dim
-        self.inner, self.boundary, self.outer = inner, boundary, outer
+        self.inner, self.boundary, self.outside = inner, boundary, outside
         self.domain = domain
         self.n_discarded = int(n_discarded)
         self._cache = {}
         return self
+
+    @property
+    def outer(self) -> np.ndarray:
+        """Deprecated alias of :attr:`outside` (the proven-outside boxes).
+
+        Not to be confused with the *view* ``"outer"`` (``inner ∪ boundary``).
+        """
+        _warn_outer("Paving.outer")
+        return self.outside
 
     # ---------------------------------------------------------------- views
     @property
@@ -821,7 +890,7 @@ class Paving(SetBase):
         ----------
         view : {"outer", "inner", "boundary", "outside"}
             ``"outer"``: ``inner ∪ boundary`` (the default, the represented set);
-            ``"outside"``: the discarded boxes of the attribute ``outer``.
+            ``"outside"``: the discarded boxes of the attribute ``outside``.
 
         Returns
         -------
@@ -835,7 +904,7 @@ class Paving(SetBase):
         if v == "boundary":
             return self.boundary
         if v == "outside":
-            return self.outer
+            return self.outside
         raise ValueError(f"Unknown view {view!r}; valid views: {_VIEWS} ('outer' is "
                          "inner ∪ boundary, 'outside' the discarded boxes)")
 
@@ -859,9 +928,15 @@ class Paving(SetBase):
         return int(self.boundary.shape[0])
 
     @property
-    def n_outer(self) -> int:
+    def n_outside(self) -> int:
         """Number of stored outside (discarded) boxes."""
-        return int(self.outer.shape[0])
+        return int(self.outside.shape[0])
+
+    @property
+    def n_outer(self) -> int:
+        """Deprecated alias of :attr:`n_outside`."""
+        _warn_outer("Paving.n_outer")
+        return self.n_outside
 
     @property
     def n_boxes(self) -> int:
@@ -1067,6 +1142,7 @@ class Paving(SetBase):
         -------
         Paving
         """
+        other = held_set(other)  # a solver's result: its paving
         if isinstance(other, Box):
             other = Paving(inner=other)
         if not isinstance(other, Paving):
@@ -1074,20 +1150,20 @@ class Paving(SetBase):
         if other.dim != self._n:
             raise DimensionError(
                 f"cannot unite pavings of dimensions {self._n} and {other.dim}")
-        A, B = self.outer, other.outer
+        A, B = self.outside, other.outside
         ia, ib = _pairs(A, B)
         lo = np.maximum(A[ia, :, 0], B[ib, :, 0])
         hi = np.minimum(A[ia, :, 1], B[ib, :, 1])
         flat_a = A[ia, :, 0] == A[ia, :, 1]
         flat_b = B[ib, :, 0] == B[ib, :, 1]
         keep = ((lo < hi) | flat_a | flat_b).all(axis=1)  # drop mere face contacts
-        outer = np.stack([lo[keep], hi[keep]], axis=-1).reshape(-1, self._n, 2)
+        outside = np.stack([lo[keep], hi[keep]], axis=-1).reshape(-1, self._n, 2)
         domain = None
         if self.domain is not None and other.domain is not None:
             domain = self.domain | other.domain
         return Paving(inner=np.concatenate([self.inner, other.inner]),
                       boundary=np.concatenate([self.boundary, other.boundary]),
-                      outer=outer, domain=domain)
+                      outside=outside, domain=domain)
 
     def __or__(self, other: Any) -> Paving:
         if not isinstance(other, (Paving, Box)):
@@ -1119,7 +1195,7 @@ class Paving(SetBase):
             Add a legend with one entry per drawn category.
         colors, labels : dict, optional
             Face colour and legend label per category ``"inner"``, ``"boundary"``,
-            ``"outer"``.
+            ``"outside"`` (the old key ``"outer"`` is a deprecated alias of ``"outside"``).
         **kw
             Passed to every ``PatchCollection`` (``edgecolor``, ``linewidth``, ``alpha``,
             ...); a ``facecolor`` here overrides ``colors``.
@@ -1141,9 +1217,9 @@ class Paving(SetBase):
             sel = [i, j]
         else:
             sel = [0]
-        col = {**_DEFAULT_COLORS, **(colors or {})}
-        lab = {**_DEFAULT_LABELS, **(labels or {})}
-        cats = [("outer", self.outer)] if show_outer else []
+        col = {**_DEFAULT_COLORS, **_outside_key(colors, "colors")}
+        lab = {**_DEFAULT_LABELS, **_outside_key(labels, "labels")}
+        cats = [("outside", self.outside)] if show_outer else []
         cats += [("boundary", self.boundary), ("inner", self.inner)]
         drawn = {name: arr[:, sel, :] for name, arr in cats if arr.shape[0]}
         if n > 2:
@@ -1165,7 +1241,7 @@ class Paving(SetBase):
             "dim": self._n,
             "inner": np.array(self.inner),
             "boundary": np.array(self.boundary),
-            "outer": np.array(self.outer),
+            "outside": np.array(self.outside),
             "domain": None if self.domain is None else self.domain.as_array(),
             "n_discarded": self.n_discarded,
         }
@@ -1173,16 +1249,28 @@ class Paving(SetBase):
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> Paving:
         n = int(state["dim"])
+        state = dict(state)
+        if "outside" not in state and "outer" in state:  # files written before the rename
+            state["outside"] = state["outer"]
         arrs = {k: np.asarray(state[k], dtype=float).reshape(-1, n, 2)
-                for k in ("inner", "boundary", "outer")}
+                for k in ("inner", "boundary", "outside")}
         dom = state.get("domain")
         domain = None if dom is None else Box.from_array(np.asarray(dom, dtype=float))
         return cls(**arrs, domain=domain, n_discarded=int(state["n_discarded"]))
 
     def __repr__(self) -> str:
         return (f"Paving(dim={self._n}, inner={self.n_inner}, boundary={self.n_boundary}, "
-                f"outer={self.n_outer}, n_discarded={self.n_discarded}, "
+                f"outside={self.n_outside}, n_discarded={self.n_discarded}, "
                 f"domain={self.domain!r})")
+
+
+def _outside_key(d: dict[str, Any] | None, what: str) -> dict[str, Any]:
+    """A copy of a per-category dict with the deprecated key ``"outer"`` renamed."""
+    d = dict(d or {})
+    if "outer" in d:
+        _warn_outer(f"the key 'outer' of {what}=", stacklevel=4)
+        d.setdefault("outside", d.pop("outer"))
+    return d
 
 
 def _clip_infinite(drawn: dict[str, np.ndarray], domain: np.ndarray | None

@@ -8,7 +8,7 @@ import numpy as np
 
 from .._validate import as_boxes, as_points
 from ..exceptions import DimensionError
-from .base import _TYPES, SetBase
+from .base import _TYPES, SetBase, held_set
 from .box import Box
 
 __all__ = ["SetUnion"]
@@ -36,6 +36,7 @@ class SetUnion(SetBase):
     def __init__(self, members: Any, dim: int | None = None) -> None:
         flat: list[Any] = []
         for S in members:
+            S = held_set(S)  # a solver's result: its paving
             if isinstance(S, SetUnion):
                 flat.extend(S.members)
             else:

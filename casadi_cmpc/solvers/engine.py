@@ -232,7 +232,8 @@ class BnBOutcome:
     inner, boundary, outer : frontier
         Elements classified INNER; undecided elements narrower than eps (plus everything left
         when a limit stopped the search); elements classified OUTER (empty unless
-        ``keep_outer``).
+        ``keep_outer``). The raw outcome keeps the names of the labels; the solvers' results
+        (:class:`~casadi_cmpc.SetResult`) call the OUTER elements ``outside``.
     n_discarded : int
         Number of OUTER elements.
     status : Status

@@ -21,12 +21,14 @@ import casadi as ca
 import numpy as np
 
 from .._validate import as_boxes
-from ..exceptions import CmpcWarning, DimensionError, UnboundedSetError
+from ..exceptions import CmpcWarning, DimensionError, ModelError, UnboundedSetError
 from ..interval.modal import SemanticExtension
+from ..model import Model
 from ..sets.box import Box
 from ..sets.paving import Paving
 from ._common import positive_eps, split_inclusion
 from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
+from .result import SetResult
 
 __all__ = ["quantified_sivia"]
 
@@ -273,30 +275,58 @@ class _QuantifiedClassifier:
         return (in_a & (others == p - 1)).any(axis=1)
 
 
-def quantified_sivia(f: Any, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
-                     method: str = "auto", options: dict[str, Any] | None = None,
-                     split_ratio: float = 0.5, relative: bool = False,
-                     max_boxes: int = 2_000_000, time_limit: float | None = None,
-                     keep_outer: bool = True, progress: bool | None = None) -> Paving:
+def _model_function(model: Model, X0: Any, U: Any, W: Any
+                    ) -> tuple[ca.Function, Any, Any, Any]:
+    """(Function ``(x, u[, w])`` of the successor, X0, U, W) of a Model, boxes defaulted."""
+    if model.m == 0:
+        raise ModelError(
+            f"model '{model.name}' has no input: there is no u to quantify; invert its "
+            "successor with cm.sivia(model, Y=..., eps=...) (for every w in W)")
+    if model.l == 0:
+        if W is not None:
+            raise ModelError(f"model '{model.name}' has no disturbance w; do not pass W")
+        fun = model._cached(("quantified_map",), lambda: ca.Function(
+            f"{model.name}_f_xu", [model.x, model.u], [model.f], ["x", "u"], ["x_next"]))
+    else:
+        W = model.W if W is None else W
+        fun = model._cached(("quantified_map_w",), lambda: ca.Function(
+            f"{model.name}_f_xuw", [model.x, model.u, model.w], [model.f], ["x", "u", "w"],
+            ["x_next"]))
+    return fun, model.X if X0 is None else X0, model.U if U is None else U, W
+
+
+def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: Any = None,
+                     eps: float | None = None, *, method: str = "auto",
+                     options: dict[str, Any] | None = None, split_ratio: float = 0.5,
+                     relative: bool = False, max_boxes: int = 2_000_000,
+                     time_limit: float | None = None, keep_outer: bool = True,
+                     progress: bool | None = None) -> SetResult:
     """Quantified set inversion: pave ``{x ∈ X0 : ∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y}``.
 
     Thesis §5.1.5, Alg 5.1 (one output) and Alg 5.2 (several outputs, nested bisection of U).
 
     Parameters
     ----------
-    f : casadi.Function or InclusionFunction
+    f : casadi.Function, InclusionFunction or Model
         Continuous SX Function with inputs ``(x, u, w)`` (or ``(x, u)`` when ``W`` is None) and
         one output of ``p = Y.dim`` elements. Of an InclusionFunction its Function is used
         (the semantic extension needs the graph; its natural form is shared through the
-        cache of :func:`casadi_cmpc.interval.inclusion`).
+        cache of :func:`casadi_cmpc.interval.inclusion`). A :class:`~casadi_cmpc.Model` with
+        inputs stands for its successor ``f(x, u, w)`` (``p = n``; Y is then a box of
+        successor states): ``X0``, ``U`` and ``W`` default to ``model.X``, ``model.U`` and
+        ``model.W``, so ``quantified_sivia(model, Y=T, eps=0.05)`` paves the states from
+        which, for every disturbance, some admissible input reaches ``T`` in one step
+        (a model without input is refused: use :func:`~casadi_cmpc.sivia`).
     X0 : Box or array_like, shape (n, 2)
-        The initial (bounded) box of states.
+        The initial (bounded) box of states. Required for a Function.
     U : Box or array_like, shape (m, 2)
-        Admissible inputs (existentially quantified, bounded).
+        Admissible inputs (existentially quantified, bounded). Required for a Function.
     W : Box or array_like, shape (l, 2), or None
-        Disturbances (universally quantified, bounded); None when ``f`` has no ``w``.
+        Disturbances (universally quantified, bounded); None when ``f`` has no ``w`` (for a
+        Model: ``model.W``, refused when the model has no ``w``).
     Y : Box
-        The target, of dimension ``p``; its bounds may be infinite.
+        The target, of dimension ``p``; its bounds may be infinite. Required (by keyword
+        when the boxes before it are left to their defaults).
     eps : float
         Undecided x-boxes whose widest component is at most ``eps`` (relative to the widths
         of ``X0`` when ``relative=True``) are not bisected further.
@@ -318,18 +348,19 @@ def quantified_sivia(f: Any, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
     max_boxes, time_limit : optional
         Limits; a stopped search reports its leftovers as boundary boxes (still sound).
     keep_outer : bool
-        Keep the excluded boxes (``paving.outer``) for drawing.
+        Keep the excluded boxes (``result.outside``) for drawing.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
 
     Returns
     -------
-    Paving
-        ``inner``: boxes in which the quantified statement is proven for **every** x;
-        ``outer``: boxes in which it is proven **false** for every x (for every x there is a
-        w for which no u in U works); ``boundary``: undecided boxes. Extra attributes:
-        ``status``, ``message``, ``method``, ``elapsed``, ``levels``, ``n_classified``,
-        ``n_pairs`` (U-cells examined).
+    SetResult
+        ``paving`` (a :class:`~casadi_cmpc.Paving`; the result acts as it): ``inner``: boxes
+        in which the quantified statement is proven for **every** x; ``outside``: boxes in
+        which it is proven **false** for every x (for every x there is a w for which no u in
+        U works); ``boundary``: undecided boxes. ``method`` is ``"alg5.1"`` or
+        ``"alg5.2"``, ``n_pairs`` the (x-box, U-cell) pairs examined; ``status`` is
+        ``PROVED`` when the search ran to completion, ``BUDGET`` when a limit stopped it.
 
     Raises
     ------
@@ -378,10 +409,27 @@ def quantified_sivia(f: Any, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
     ...                      cm.Box([-1], [1]), eps=0.01)
     >>> bool(P.inner[:, 0, 0].min() >= -1.5 and P.inner[:, 0, 1].max() <= 1.5)  # Σ = [-1.5, 1.5]
     True
+
+    A Model (X0, U, W default to its boxes):
+
+    >>> model = cm.Model(x=x, u=u, w=w, f=x + u + w, X=cm.Box([-4], [4]), U=cm.Box([-1], [1]),
+    ...                  W=cm.Box([-0.5], [0.5]))
+    >>> Q = quantified_sivia(model, Y=cm.Box([-1], [1]), eps=0.01)
+    >>> bool((Q.inner == P.inner).all())
+    True
     """
     meth = str(method).lower()
     if meth not in _METHODS:
         raise ValueError(f"Unknown method '{method}'; valid methods: {', '.join(_METHODS)}")
+    if Y is None:  # (a missing eps is refused below: "eps must be a positive number")
+        raise TypeError("quantified_sivia needs the target Y, e.g. "
+                        "quantified_sivia(f, X0, U, W, Y, eps) or "
+                        "quantified_sivia(model, Y=Y, eps=0.05)")
+    if isinstance(f, Model):
+        f, X0, U, W = _model_function(f, X0, U, W)
+    elif X0 is None or U is None:
+        raise TypeError("quantified_sivia needs the boxes X0 and U for a Function f (they "
+                        "default to the model's boxes only for a Model)")
     f = split_inclusion(f, "f")[0]
     if not isinstance(f, ca.Function):
         raise TypeError(f"f must be a casadi.Function or an InclusionFunction; got "
@@ -421,13 +469,8 @@ def quantified_sivia(f: Any, X0: Any, U: Any, W: Any, Y: Any, eps: float, *,
     fr = BoxFrontier.from_boxes(x0[None], scale=scale, split_ratio=split_ratio)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="quantified sivia")
-    paving = Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
-                    outer=out.outer.boxes, domain=domain, n_discarded=out.n_discarded)
-    paving.status = out.status
-    paving.message = out.message
-    paving.method = meth
-    paving.elapsed = out.elapsed
-    paving.levels = out.levels
-    paving.n_classified = out.n_classified
-    paving.n_pairs = classify.n_pairs
-    return paving
+    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, out.outer.boxes, domain,
+                                 out.n_discarded)
+    return SetResult(status=out.status, message=out.message, method=meth, nit=out.levels,
+                     n_boxes=out.n_classified, elapsed=out.elapsed, paving=paving,
+                     n_pairs=classify.n_pairs, history=out.history)

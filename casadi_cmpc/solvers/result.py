@@ -3,12 +3,15 @@
 Every solver returns a frozen dataclass built on :class:`Result`, which holds what all of
 them report: the outcome code ``status`` (a :class:`~casadi_cmpc.solvers.engine.Status`),
 ``success == (status == PROVED)``, a ``message`` in words, the ``method`` used, and the
-effort spent (``nit``, ``n_boxes``, ``elapsed``). Subclasses add the solver's answer.
+effort spent (``nit``, ``n_boxes``, ``elapsed``). Subclasses add the solver's answer; the
+set-valued solvers (SIVIA, quantified and zonotope set inversion, one-step sets) return a
+:class:`SetResult`, which holds the paving.
 """
 
 from __future__ import annotations
 
 import operator
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,7 +20,7 @@ import numpy as np
 from ..exceptions import DimensionError
 from .engine import Status
 
-__all__ = ["Certificate", "Result"]
+__all__ = ["Certificate", "Result", "SetResult"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -181,6 +184,145 @@ class _BracketResult(Result):
     def _repr_parts(self) -> list[str]:
         return [f"lower={self.lower:.10g}", f"upper={self.upper:.10g}", *self._repr_solution(),
                 f"candidates={self.candidates.shape[0]}"]
+
+
+@dataclass(frozen=True, eq=False, kw_only=True, repr=False)
+class SetResult(Result):
+    """Outcome of a set-valued solver: a :class:`Result` holding the paving it computed.
+
+    Returned by :func:`~casadi_cmpc.sivia`, :func:`~casadi_cmpc.quantified_sivia`,
+    :func:`~casadi_cmpc.solvers.zonotope_sivia.zonotope_sivia`,
+    :func:`~casadi_cmpc.solvers.zonotope_sivia.inner_zonotopes` and (as its subclass
+    :class:`~casadi_cmpc.OneStepSet`) :func:`~casadi_cmpc.one_step_set`.
+
+    Attributes
+    ----------
+    paving : Paving or ZonotopePaving
+        The answer: boxes (or zonotopes) ``inner`` (every point proven to be a solution),
+        ``boundary`` (undecided) and ``outside`` (every point proven not to be one; empty
+        unless the solver kept them), with ``domain`` and ``n_discarded``. What "solution"
+        means is stated by each solver.
+    n_pairs : int
+        (state box, input cell) pairs examined by a nested search over the inputs
+        (quantified set inversion, one-step sets); 0 for the others.
+    history : list of dict
+        Per bisection level: boxes classified, and how many became inner, outside
+        (key ``"outer"``, the engine's label) and boundary.
+    status : Status
+        ``PROVED``: the search ran to completion (every box is decided or narrower than
+        eps); ``BUDGET``: a limit (``max_boxes``, ``time_limit``) or an interruption
+        stopped it, and the unexplored boxes are reported as boundary (still sound).
+        The proof is in the paving, whatever the status.
+    nit, n_boxes : int
+        Bisection levels and boxes classified (also available under their older names
+        ``levels`` and ``n_classified``). Not to be confused with ``paving.n_boxes``, the
+        number of inner and boundary boxes (``len(result)``).
+
+    Notes
+    -----
+    **Acts as its paving.** Attributes that are not fields of the result are looked up on
+    the paving: ``res.inner``, ``res.boundary``, ``res.outside``, ``res.domain``,
+    ``res.n_discarded``, ``res.volume(...)``, ``res.contains(...)``, ``res.plot(...)``,
+    ``res.view_boxes(...)``, ``res.n_inner``, ``res.save(path)`` (saves the paving) and
+    so on; ``len(res)``, ``bool(res)`` and ``res | other`` (union) are those of the paving,
+    and ``isinstance(res, cm.Paving)`` is True when it holds a Paving. So code written for
+    the Paving these solvers returned before keeps working. ``res.outer`` is the deprecated
+    name of ``res.outside``.
+
+    Examples
+    --------
+    >>> import casadi as ca, casadi_cmpc as cm
+    >>> p = ca.SX.sym("p", 2)
+    >>> disk = ca.Function("disk", [p], [p[0]**2 + p[1]**2])
+    >>> res = cm.sivia(disk, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.5)
+    >>> res.success, isinstance(res.paving, cm.Paving), isinstance(res, cm.Paving)
+    (True, True, True)
+    >>> res.n_inner == len(res.paving.inner) == len(res.inner)
+    True
+    """
+
+    #: the attribute holding the set (see :class:`~casadi_cmpc.sets.base.HoldsSetMeta`)
+    _held_set = "paving"
+
+    paving: Any
+    n_pairs: int = 0
+    history: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        pav = self.paving
+        if isinstance(pav, SetResult):  # a result given as the paving: hold its paving
+            pav = pav.paving
+        missing = [a for a in ("inner", "boundary", "outside", "domain", "n_discarded")
+                   if not hasattr(pav, a)]
+        if missing:
+            raise TypeError(f"paving must be a Paving or ZonotopePaving; got "
+                            f"{type(pav).__name__} (without {', '.join(missing)})")
+        try:
+            n_pairs = operator.index(self.n_pairs)
+        except TypeError:
+            raise TypeError(f"n_pairs must be an integer; got {self.n_pairs!r}") from None
+        if n_pairs < 0:
+            raise ValueError(f"n_pairs must be >= 0; got {n_pairs}")
+        self._set(paving=pav, n_pairs=n_pairs, history=list(self.history))
+
+    # ------------------------------------------------------------- older names
+    @property
+    def levels(self) -> int:
+        """Bisection levels, same as ``nit``."""
+        return self.nit
+
+    @property
+    def n_classified(self) -> int:
+        """Boxes classified, same as ``n_boxes``."""
+        return self.n_boxes
+
+    @property
+    def outer(self) -> Any:
+        """Deprecated alias of ``outside`` (the proven-outside boxes of the paving)."""
+        warnings.warn(
+            "SetResult.outer is deprecated: the proven-outside boxes are now called "
+            "'outside' (the view 'outer' is inner ∪ boundary, the outer approximation); use "
+            "'outside'", DeprecationWarning, stacklevel=2)
+        return self.paving.outside
+
+    # ------------------------------------------------------ acts as its paving
+    def __getattr__(self, name: str) -> Any:
+        # only called when the normal lookup fails: fields and methods of the result win
+        if name.startswith("__") and name.endswith("__"):
+            raise AttributeError(name)  # protocols (copy, pickle, numpy) are not forwarded
+        try:
+            pav = object.__getattribute__(self, "paving")
+        except AttributeError:  # not initialised yet (unpickling)
+            raise AttributeError(name) from None
+        try:
+            return getattr(pav, name)
+        except AttributeError:
+            raise AttributeError(
+                f"'{type(self).__name__}' object has no attribute '{name}' (nor has its "
+                f"paving, a {type(pav).__name__})") from None
+
+    def __dir__(self) -> list[str]:
+        return sorted(set(super().__dir__()) | set(dir(self.paving)))
+
+    def __len__(self) -> int:
+        return len(self.paving)
+
+    def __bool__(self) -> bool:
+        return bool(self.paving)
+
+    def __or__(self, other: Any) -> Any:
+        if isinstance(other, SetResult):
+            other = other.paving
+        return self.paving | other
+
+    def __ror__(self, other: Any) -> Any:
+        return other | self.paving
+
+    def _repr_parts(self) -> list[str]:
+        p = self.paving
+        return [f"inner={len(p.inner)}", f"boundary={len(p.boundary)}",
+                f"outside={len(p.outside)}"]
 
 
 def _format_point(p: np.ndarray | None) -> str:

@@ -9,13 +9,16 @@ import casadi as ca
 import numpy as np
 
 from .._validate import as_boxes
-from ..exceptions import DimensionError
+from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
 from ..interval.compiler import InclusionFunction, inclusion
+from ..model import Model
 from ..sets.base import SetBase
 from ..sets.box import Box
 from ..sets.paving import Paving
+from ._common import single_box
 from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
+from .result import SetResult
 
 __all__ = ["sivia", "image_classifier"]
 
@@ -373,28 +376,69 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
     return classify_set
 
 
-def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
-          open_target: bool = False, split_ratio: float = 0.5, relative: bool = False,
-          max_boxes: int = 5_000_000, time_limit: float | None = None,
-          keep_outer: bool = True, contract: bool = False,
-          progress: bool | None = None) -> Paving:
+def _model_map(model: Model, X0: Any, W: Any) -> tuple[ca.Function, Any, np.ndarray | None]:
+    """(Function of the successor, X0, W box or None) of a Model given to :func:`sivia`.
+
+    Without a disturbance the Function is ``x -> f(x)``; with one it is ``[x; w] -> f(x, w)``
+    (one stacked input), W being kept whole in every box. Both are cached on the model.
+    """
+    if model.m > 0:
+        raise ModelError(
+            f"sivia inverts a map of the state alone, but model '{model.name}' has "
+            f"{model.m} input(s): whether some u in U or every u must bring f(x, u, w) into "
+            "Y is not something sivia guesses. For a given law u = K x (or an expression "
+            "in x) invert the closed loop, cm.sivia(model.closed_loop(K), Y=..., eps=...); "
+            "for 'some u in U works' use cm.one_step_set(model, target, eps) or "
+            "cm.quantified_sivia(model, Y=..., eps=...)")
+    X0 = model.X if X0 is None else X0
+    if model.l == 0:
+        if W is not None:
+            raise ModelError(f"model '{model.name}' has no disturbance w; do not pass W")
+        fun = model._cached(("sivia_map",), lambda: ca.Function(
+            f"{model.name}_successor", [model.x], [model.f], ["x"], ["x_next"]))
+        return fun, X0, None
+    Wb = single_box(model.W if W is None else W, "W", model.l)
+    fun = model._cached(("sivia_map_xw",), lambda: ca.Function(
+        f"{model.name}_successor_xw", [ca.vertcat(model.x, model.w)], [model.f], ["xw"],
+        ["x_next"]))
+    return fun, X0, Wb
+
+
+def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
+          W: Any = None, kind: str = "natural", open_target: bool = False,
+          split_ratio: float = 0.5, relative: bool = False, max_boxes: int = 5_000_000,
+          time_limit: float | None = None, keep_outer: bool = True, contract: bool = False,
+          progress: bool | None = None) -> SetResult:
     """Set inversion via interval analysis: pave ``{x in X0 : f(x) in Y}`` (thesis Alg 4.1).
 
     Parameters
     ----------
-    f : casadi.Function or InclusionFunction
+    f : casadi.Function, InclusionFunction or Model
         ``R^n -> R^m``, one input and one output (an SX Function; MX is expanded). A
         casadi.Function is compiled with :func:`casadi_cmpc.interval.inclusion` (cached per
         Function object); an InclusionFunction is used as given (its own kind and backend;
         ``kind`` is then ignored).
+
+        A :class:`~casadi_cmpc.Model` **without inputs** (``m = 0``, e.g. a closed loop
+        ``model.closed_loop(K)``) stands for its successor map ``x -> f(x, w)``: the
+        result paves ``{x in X0 : f(x, w) in Y for every w in W}`` (``X0`` defaults to
+        ``model.X``, ``W`` to ``model.W``; W is an interval parameter, never bisected).
+        Only the successor is inverted: a closed loop's input bound ``law(x) in U`` is not
+        part of it. A model with inputs is refused (:class:`~casadi_cmpc.ModelError`):
+        whether *some* or *every* u must work is ambiguous; close the loop, or use
+        :func:`~casadi_cmpc.one_step_set` / :func:`~casadi_cmpc.quantified_sivia` for
+        "some u in U".
     X0 : Box or array_like, shape (n, 2)
-        The initial (bounded) box.
+        The initial (bounded) box. Required, except for a Model (default ``model.X``).
     Y : Box, Polytope, PolytopeUnion or another set of dimension m
-        The target set. A Box may have infinite bounds (e.g. ``[0, inf)``).
+        The target set. A Box may have infinite bounds (e.g. ``[0, inf)``). Required
+        (pass it by keyword when X0 is left to its default: ``sivia(model, Y=T, eps=0.1)``).
     eps : float
         Boxes whose widest component is at most ``eps`` are not bisected further (relative
         to the widths of ``X0`` when ``relative=True``); neither are boxes whose widest
-        component holds no float strictly inside (both become boundary boxes).
+        component holds no float strictly inside (both become boundary boxes). Required.
+    W : Box, optional
+        Disturbance box of a Model with ``w`` (default: ``model.W``); refused otherwise.
     kind : {"natural", "centered"}
         Inclusion function used to enclose the images.
     open_target : bool
@@ -404,33 +448,38 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     max_boxes, time_limit : optional limits; a stopped search reports its leftovers as
         boundary boxes (still sound).
     keep_outer : bool
-        Keep the discarded boxes (``paving.outer``) for drawing; they are always counted.
+        Keep the discarded boxes (``result.outside``) for drawing; they are always counted.
     contract : bool
         Narrow every box with a forward-backward (HC4) contractor generated from the same
         CasADi graph before testing it (:func:`casadi_cmpc.interval.contractor`, target Y or,
         for a set target, its bounding box). The parts removed are outside boxes. Needs a
-        casadi.Function or a natural InclusionFunction. Pays off when constraints are thin
-        or tight (equalities, narrow bands); on wide inequality regions the inclusion test
-        alone is usually cheaper.
+        casadi.Function or a natural InclusionFunction (or a Model without disturbance:
+        contracting W would prove less than "for every w"). Pays off when constraints are
+        thin or tight (equalities, narrow bands); on wide inequality regions the inclusion
+        test alone is usually cheaper.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
 
     Returns
     -------
-    Paving
-        Three views of closed boxes that together cover X0 (neighbouring boxes share faces):
+    SetResult
+        ``paving``: a :class:`~casadi_cmpc.Paving` whose three views of closed boxes together
+        cover X0 (neighbouring boxes share faces):
 
         * ``inner``: at every point of each box, faces included, ``f`` is defined and
-          ``f(x) ∈ Y`` (the interior of Y with ``open_target=True``);
-        * ``outer``: at no point of each box, faces included, is ``f`` defined with
-          ``f(x) ∈ Y`` (points where f is undefined are not solutions);
+          ``f(x) ∈ Y`` (the interior of Y with ``open_target=True``; for every w in W for a
+          Model with a disturbance);
+        * ``outside``: at no point of each box, faces included, is ``f`` defined with
+          ``f(x) ∈ Y`` (points where f is undefined are not solutions; for a Model with a
+          disturbance: for no w in W);
         * ``boundary``: undecided boxes (narrower than eps, or left over when a limit
           stopped the search); nothing is claimed about them.
 
         A point on a face shared by an inner and a boundary box is a solution; on a face
-        shared by an outer and a boundary box it is not. ``n_discarded`` counts the outer
-        boxes. Extra attributes: ``status`` (:class:`~casadi_cmpc.solvers.engine.Status`),
-        ``message``, ``elapsed`` (s), ``levels``, ``n_classified``.
+        shared by an outside and a boundary box it is not. ``n_discarded`` counts the
+        outside boxes. The result acts as its paving (``res.inner``, ``res.volume()``,
+        ``res.plot()``, ... see :class:`~casadi_cmpc.SetResult`); ``status`` is ``PROVED``
+        when the search ran to completion, ``BUDGET`` when a limit stopped it.
 
     Examples
     --------
@@ -440,13 +489,37 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     >>> P = cm.sivia(f, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.1)
     >>> 2.5 < P.volume(view="inner") <= np.pi <= P.volume()
     True
+
+    A closed loop as a Model (X0 = model.X):
+
+    >>> x = ca.SX.sym("x", 2)
+    >>> model = cm.Model(x=x, u=None, f=0.5 * x, X=cm.Box([-2, -2], [2, 2]))
+    >>> res = cm.sivia(model, Y=cm.Box([-0.5, -0.5], [0.5, 0.5]), eps=0.1)
+    >>> res.contains([[0.9, -0.9], [1.1, 0.0]], view="inner")
+    array([ True, False])
+    >>> bool(res.contains([1.1, 0.0], view="outside"))
+    True
     """
+    if Y is None:  # (a missing eps is refused by the engine: "eps must be a positive number")
+        raise TypeError("sivia needs the target Y, e.g. cm.sivia(f, X0, Y, eps=0.1) or "
+                        "cm.sivia(model, Y=Y, eps=0.1)")
+    Wb = None
+    if isinstance(f, Model):
+        f, X0, Wb = _model_map(f, X0, W)
+    else:
+        if W is not None:
+            raise ModelError("W is only used with a Model that has a disturbance w; put the "
+                             "parameters of a Function into its input")
+        if X0 is None:
+            raise TypeError("sivia needs the initial box X0 (it defaults to model.X only "
+                            "for a Model)")
     F = _as_inclusion(f, kind)
     n = F.size_in[0]
+    l = 0 if Wb is None else Wb.shape[0]
     r = float(split_ratio)
     if not 0.0 < r < 1.0:
         raise ValueError(f"split_ratio must lie strictly between 0 and 1; got {split_ratio!r}")
-    x0 = as_boxes(X0, n, "X0")
+    x0 = as_boxes(X0, n - l, "X0")
     if x0.shape[0] != 1:
         raise DimensionError(f"X0 must be a single box; got {x0.shape[0]} boxes")
     domain = Box(x0[0, :, 0], x0[0, :, 1])
@@ -457,6 +530,13 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     scale = None
     if relative:
         scale = np.where(domain.diam > 0, domain.diam, 1.0)
+    if l:
+        if contract:
+            raise ValueError("contract=True is not available for a Model with a disturbance: "
+                             "contracting W would prove f(x, w) in Y for part of W only")
+        # W rides along whole in every box: an infinite scale makes its widths count as 0
+        x0 = np.concatenate([x0, Wb[None]], axis=1)
+        scale = np.concatenate([np.ones(n - l) if scale is None else scale, np.full(l, np.inf)])
     classify = image_classifier(F, Y, open_target)
     if contract:
         from ..interval.contractor import contractor
@@ -466,17 +546,17 @@ def sivia(f: Any, X0: Any, Y: Any, eps: float, *, kind: str = "natural",
     fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=r)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="sivia")
-    outer, n_discarded = out.outer.boxes, out.n_discarded
+    parts = [out.inner.boxes, out.boundary.boxes, out.outer.boxes]
+    n_discarded = out.n_discarded
     if contract:
         if classify.removed:
-            outer = np.concatenate([outer] + classify.removed)
+            parts[2] = np.concatenate([parts[2]] + classify.removed)
         n_discarded += classify.n_removed
+    if l:  # the state part of the (x, w) boxes, whose w part is all of W
+        parts = [np.ascontiguousarray(b[:, :n - l]) for b in parts]
     # Every box comes from bisecting X0 and lies in it: no checks needed.
-    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, outer, domain,
-                                 n_discarded)
-    paving.status = out.status
-    paving.message = out.message
-    paving.elapsed = out.elapsed
-    paving.levels = out.levels
-    paving.n_classified = out.n_classified
-    return paving
+    paving = Paving._from_solver(*parts, domain, n_discarded)
+    method = f"sivia (Alg 4.1, {F.kind} inclusion{', contractor' if contract else ''})"
+    return SetResult(status=out.status, message=out.message, method=method, nit=out.levels,
+                     n_boxes=out.n_classified, elapsed=out.elapsed, paving=paving,
+                     history=out.history)

@@ -34,7 +34,7 @@ from __future__ import annotations
 import itertools
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from math import comb
 from typing import Any
 
@@ -55,12 +55,14 @@ from ..interval._derivative import JacobianInclusion
 from ..interval.compiler import InclusionFunction, _discontinuous_ops
 from ..model import Model
 from ..sets import _zono_num as zn
-from ..sets.base import SetBase
+from ..sets.base import HoldsSetMeta, SetBase
 from ..sets.box import Box
+from ..sets.paving import _outside_keyword, _warn_outer
 from ..sets.polytope import Polytope, PolytopeUnion
 from ..sets.zonotope import Zonotope
 from ._common import inclusion_of, split_inclusion
-from .engine import INNER, OUTER, Status, branch_and_bound
+from .engine import INNER, OUTER, branch_and_bound
+from .result import SetResult
 
 __all__ = ["ZonotopeFrontier", "ZonotopePaving", "zonotope_classifier", "zonotope_sivia",
            "inner_zonotopes"]
@@ -906,9 +908,23 @@ def zonotope_classifier(f: Any, Y: Any, *, n: int | None = None, X: Any = None, 
 
 
 # ----------------------------------------------------------------------------- result
-@dataclass
-class ZonotopePaving:
-    """Result of :func:`zonotope_sivia` / :func:`inner_zonotopes`.
+class ZonotopePaving(metaclass=HoldsSetMeta):
+    """The zonotopes of :func:`zonotope_sivia` / :func:`inner_zonotopes`, by label.
+
+    Held by their :class:`~casadi_cmpc.SetResult` as ``result.paving`` (the result acts as
+    it: ``result.inner``, ``result.volume()``, ``result.plot()``, and
+    ``isinstance(result, ZonotopePaving)`` is True).
+
+    Parameters
+    ----------
+    inner, boundary, outside : ZonotopeFrontier
+        See the attributes.
+    domain : Zonotope
+        The initial zonotope.
+    n_discarded : int, optional
+        Number of zonotopes proven outside (default ``len(outside)``).
+    outer : deprecated
+        Old name of ``outside`` (keyword only; emits a DeprecationWarning).
 
     Attributes
     ----------
@@ -918,53 +934,58 @@ class ZonotopePaving:
     boundary : ZonotopeFrontier
         Undecided zonotopes with ``Max(H) <= eps`` (Σ_x^b), plus any leftovers of a search
         stopped by a limit.
-    outer : ZonotopeFrontier
-        Zonotopes proven outside (discarded); empty unless ``keep_outer``.
+    outside : ZonotopeFrontier
+        Zonotopes proven outside (discarded); empty unless ``keep_outer``. ``outer`` is its
+        deprecated alias.
     domain : Zonotope
-        The initial zonotope.
     n_discarded : int
-        Number of zonotopes proven outside.
-    status : Status
-        ``PROVED`` when the search ran to completion, ``BUDGET`` when a limit stopped it.
-    message : str
-    elapsed : float
-        Seconds.
-    levels, n_classified : int
-        Bisection levels and zonotopes classified.
     """
 
-    inner: ZonotopeFrontier
-    boundary: ZonotopeFrontier
-    outer: ZonotopeFrontier
-    domain: Zonotope
-    n_discarded: int
-    status: Status
-    message: str
-    elapsed: float
-    levels: int
-    n_classified: int
-    history: list[dict] = field(default_factory=list, repr=False)
+    def __init__(self, inner: ZonotopeFrontier, boundary: ZonotopeFrontier,
+                 outside: ZonotopeFrontier | None = None, domain: Zonotope | None = None,
+                 n_discarded: int | None = None, *, outer: ZonotopeFrontier | None = None
+                 ) -> None:
+        outside = _outside_keyword(outside, outer, "ZonotopePaving()")
+        if outside is None or domain is None:
+            raise TypeError("ZonotopePaving needs inner, boundary, outside and domain")
+        self.inner = inner
+        self.boundary = boundary
+        self.outside = outside
+        self.domain = domain
+        self.n_discarded = len(outside) if n_discarded is None else int(n_discarded)
 
     @property
-    def success(self) -> bool:
-        """True when the search completed (``status == PROVED``)."""
-        return self.status == Status.PROVED
+    def outer(self) -> ZonotopeFrontier:
+        """Deprecated alias of :attr:`outside` (the discarded zonotopes)."""
+        _warn_outer("ZonotopePaving.outer")
+        return self.outside
+
+    def __repr__(self) -> str:
+        return (f"ZonotopePaving(dim={self.domain.dim}, inner={len(self.inner)}, "
+                f"boundary={len(self.boundary)}, outside={len(self.outside)}, "
+                f"n_discarded={self.n_discarded})")
 
     def volume(self, view: str = "inner") -> float:
-        """Sum of the volumes of the ``"inner"``, ``"boundary"`` or ``"outer"`` zonotopes.
+        """Sum of the volumes of the ``"inner"``, ``"boundary"`` or ``"outside"`` zonotopes.
 
         The halves of a parallelotope share only a facet (Thm 4.2), so for a parallelotope
         domain this is the volume of the union; with redundant generators the halves
-        overlap and the sum counts overlaps more than once.
+        overlap and the sum counts overlaps more than once. The view ``"outer"`` is a
+        deprecated name of ``"outside"`` here (for a :class:`~casadi_cmpc.Paving` the view
+        ``"outer"`` is inner ∪ boundary).
         """
-        fr = {"inner": self.inner, "boundary": self.boundary, "outer": self.outer}.get(view)
+        v = str(view).lower()
+        if v == "outer":
+            _warn_outer("the view 'outer' of ZonotopePaving.volume")
+            v = "outside"
+        fr = {"inner": self.inner, "boundary": self.boundary, "outside": self.outside}.get(v)
         if fr is None:
-            raise ValueError(f"Unknown view '{view}'; valid: inner, boundary, outer")
+            raise ValueError(f"Unknown view '{view}'; valid: inner, boundary, outside")
         return float(fr.volumes().sum()) if len(fr) else 0.0
 
     def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), domain: bool = True,
              outer: bool = True) -> Any:
-        """Draw the paving: inner (green), boundary (yellow), outer (light blue), domain.
+        """Draw the paving: inner (green), boundary (yellow), outside (light blue), domain.
 
         Parameters
         ----------
@@ -974,7 +995,7 @@ class ZonotopePaving:
         domain : bool
             Outline the initial zonotope.
         outer : bool
-            Draw the discarded zonotopes (when kept).
+            Draw the discarded (outside) zonotopes, when kept.
 
         Returns
         -------
@@ -983,9 +1004,9 @@ class ZonotopePaving:
         from ..plot import new_axes
 
         ax = new_axes(ax)
-        if outer and len(self.outer):
-            self.outer.plot(ax, dims, facecolor="lightsteelblue", edgecolor="0.5",
-                            linewidth=0.2, label=f"outside ({len(self.outer)})")
+        if outer and len(self.outside):
+            self.outside.plot(ax, dims, facecolor="lightsteelblue", edgecolor="0.5",
+                              linewidth=0.2, label=f"outside ({len(self.outside)})")
         if len(self.boundary):
             self.boundary.plot(ax, dims, facecolor="gold", edgecolor="0.3", linewidth=0.2,
                                label=f"boundary ({len(self.boundary)})")
@@ -996,6 +1017,14 @@ class ZonotopePaving:
             self.domain.plot(ax=ax, dims=dims, facecolor="none", edgecolor="k",
                              linewidth=1.2, alpha=1.0, linestyle="--", label="domain")
         return ax
+
+
+def _zonotope_result(out: Any, Z0: Zonotope, method: str) -> SetResult:
+    """The SetResult of a zonotope search from the engine's outcome."""
+    paving = ZonotopePaving(out.inner, out.boundary, out.outer, Z0, out.n_discarded)
+    return SetResult(status=out.status, message=out.message, method=method, nit=out.levels,
+                     n_boxes=out.n_classified, elapsed=out.elapsed, paving=paving,
+                     history=out.history)
 
 
 # ----------------------------------------------------------------------------- solvers
@@ -1037,7 +1066,7 @@ def _bounding_parallelotope(P: Polytope, method: str = "svd",
 def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
                    box_form: str | None = "natural", max_boxes: int = 2_000_000,
                    time_limit: float | None = None, keep_outer: bool = True,
-                   progress: bool | None = None) -> ZonotopePaving:
+                   progress: bool | None = None) -> SetResult:
     r"""Set inversion via zonotope geometry: pave ``{x in X0 : f(x) in Y}`` (thesis Alg 4.3).
 
     Parameters
@@ -1072,10 +1101,12 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
 
     Returns
     -------
-    ZonotopePaving
-        ``inner`` (every point proven: ``f(x) in Y``, and ``x in X0`` for a Polytope
-        ``X0``), ``boundary``, ``outer``, ``n_discarded``, ``status``, ``elapsed``,
-        ``plot(ax)``.
+    SetResult
+        ``paving``: a :class:`ZonotopePaving` (the result acts as it) with ``inner`` (every
+        point proven: ``f(x) in Y``, for every w in W for a Model with a disturbance, and
+        ``x in X0`` for a Polytope ``X0``), ``boundary``, ``outside``, ``n_discarded``,
+        ``volume()``, ``plot(ax)``; ``status`` is ``PROVED`` when the search ran to
+        completion, ``BUDGET`` when a limit stopped it.
 
     Notes
     -----
@@ -1124,16 +1155,13 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
     fr = ZonotopeFrontier.from_zonotopes(Z0)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="zonotope sivia")
-    return ZonotopePaving(inner=out.inner, boundary=out.boundary, outer=out.outer, domain=Z0,
-                          n_discarded=out.n_discarded, status=out.status,
-                          message=out.message, elapsed=out.elapsed, levels=out.levels,
-                          n_classified=out.n_classified, history=out.history)
+    return _zonotope_result(out, Z0, "zonotope sivia (Alg 4.3)")
 
 
 def inner_zonotopes(P: Polytope, eps: float, *, method: str = "svd",
                     center: str | Any = "chebyshev", max_boxes: int = 2_000_000,
                     time_limit: float | None = None, keep_outer: bool = True,
-                    progress: bool | None = None) -> ZonotopePaving:
+                    progress: bool | None = None) -> SetResult:
     """Inner approximation of a polytope by a union of zonotopes (thesis Fig 4.8).
 
     Alg 4.3 with ``f = identity``, started from a parallelotope bounding P (§4.2.5, Fig
@@ -1156,10 +1184,10 @@ def inner_zonotopes(P: Polytope, eps: float, *, method: str = "svd",
 
     Returns
     -------
-    ZonotopePaving
-        ``inner``: zonotopes proven inside P; as eps decreases their total volume tends to
-        the volume of P (they are halves of halves of one parallelotope, so they do not
-        overlap).
+    SetResult
+        ``paving``: a :class:`ZonotopePaving`; ``inner``: zonotopes proven inside P; as eps
+        decreases their total volume tends to the volume of P (they are halves of halves of
+        one parallelotope, so they do not overlap).
 
     Examples
     --------
@@ -1177,7 +1205,4 @@ def inner_zonotopes(P: Polytope, eps: float, *, method: str = "svd",
     fr = ZonotopeFrontier.from_zonotopes(Z0)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="inner zonotopes")
-    return ZonotopePaving(inner=out.inner, boundary=out.boundary, outer=out.outer, domain=Z0,
-                          n_discarded=out.n_discarded, status=out.status,
-                          message=out.message, elapsed=out.elapsed, levels=out.levels,
-                          n_classified=out.n_classified, history=out.history)
+    return _zonotope_result(out, Z0, "inner zonotopes (Alg 4.3, f = identity)")

@@ -243,7 +243,7 @@ def test_paving_construction_views_and_counts():
     boundary = [cm.Box([2, 0], [3, 1])]
     outer = np.array([[[3, 4], [0, 2]]], dtype=float)
     P = cm.Paving(inner, boundary, outer, domain=D)
-    assert (P.dim, P.n_inner, P.n_boundary, P.n_outer) == (2, 2, 1, 1)
+    assert (P.dim, P.n_inner, P.n_boundary, P.n_outside) == (2, 2, 1, 1)
     assert P.n_boxes == len(P) == 3 and P.n_discarded == 1
     assert P.domain == D and not P.is_empty()
     np.testing.assert_array_equal(P.boxes, np.concatenate([inner, boundary[0].as_array()[None]]))
@@ -256,8 +256,8 @@ def test_paving_construction_views_and_counts():
     with pytest.raises(ValueError):
         P.boxes[0, 0, 0] = 5.0  # read-only
     I, O = P.inner_set(), P.outer_set()
-    assert (I.n_inner, I.n_boundary, I.n_outer) == (2, 0, 0)
-    assert (O.n_inner, O.n_boundary, O.n_outer) == (2, 1, 0)
+    assert (I.n_inner, I.n_boundary, I.n_outside) == (2, 0, 0)
+    assert (O.n_inner, O.n_boundary, O.n_outside) == (2, 1, 0)
     assert I.volume() == 2.0 and O.volume() == 3.0
     assert P.contains([2.5, 0.5]) is True
     assert P.contains([2.5, 0.5], view="inner") is False
@@ -266,7 +266,7 @@ def test_paving_construction_views_and_counts():
     assert cm.Paving(np.zeros((0, 3, 2))).is_empty()
     assert cm.Paving(boundary=[], domain=cm.Box([0], [1])).is_empty()
     assert "inner=2" in repr(P)
-    assert P.n_discarded == 1 and cm.Paving(outer=outer, n_discarded=7).n_discarded == 7
+    assert P.n_discarded == 1 and cm.Paving(outside=outer, n_discarded=7).n_discarded == 7
 
 
 def test_paving_refuses_bad_input():
@@ -458,12 +458,12 @@ def test_support_and_vertices_edge_cases():
 
 def test_union_keeps_views_and_intersects_outside_boxes():
     A = cm.Paving(inner=[cm.Box([0, 0], [1, 1])], boundary=[cm.Box([1, 0], [2, 1])],
-                  outer=[cm.Box([2, 0], [4, 1])], domain=cm.Box([0, 0], [4, 1]))
-    B = cm.Paving(inner=[cm.Box([3, 0], [4, 1])], outer=[cm.Box([0, 0], [3, 1])],
+                  outside=[cm.Box([2, 0], [4, 1])], domain=cm.Box([0, 0], [4, 1]))
+    B = cm.Paving(inner=[cm.Box([3, 0], [4, 1])], outside=[cm.Box([0, 0], [3, 1])],
                   domain=cm.Box([0, 0], [4, 1]))
     U = A | B
     assert (U.n_inner, U.n_boundary) == (2, 1)
-    np.testing.assert_array_equal(U.outer, [[[2, 3], [0, 1]]])  # outside both
+    np.testing.assert_array_equal(U.outside, [[[2, 3], [0, 1]]])  # outside both
     assert U.n_discarded == 1 and U.domain == cm.Box([0, 0], [4, 1])
     assert U.volume() == 3.0
     assert (A | cm.Box([5, 5], [6, 6])).domain is None
@@ -477,7 +477,7 @@ def test_union_keeps_views_and_intersects_outside_boxes():
 # ---------------------------------------------------------------------- save/load
 def _assert_same(P, Q):
     assert type(Q) is cm.Paving and Q.dim == P.dim
-    for k in ("inner", "boundary", "outer"):
+    for k in ("inner", "boundary", "outside"):
         a, b = getattr(P, k), getattr(Q, k)
         assert a.shape == b.shape and a.dtype == b.dtype
         np.testing.assert_array_equal(a, b)

@@ -34,7 +34,7 @@ def _spy(F):
 
 
 def _same_paving(P, Q):
-    for view in ("inner", "boundary", "outer"):
+    for view in ("inner", "boundary", "outside"):
         np.testing.assert_array_equal(getattr(P, view), getattr(Q, view), err_msg=view)
     assert P.n_discarded == Q.n_discarded
 
@@ -135,7 +135,7 @@ def test_minimax_with_compiled_functions():
 
 # ---------------------------------------------------------------- zonotope sivia
 def _same_zonotopes(a, b):
-    for view in ("inner", "boundary", "outer"):
+    for view in ("inner", "boundary", "outside"):
         fa, fb = getattr(a, view), getattr(b, view)
         np.testing.assert_array_equal(fa.centers, fb.centers, err_msg=view)
         np.testing.assert_array_equal(fa.generators, fb.generators, err_msg=view)

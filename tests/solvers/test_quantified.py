@@ -41,7 +41,7 @@ def exact_sum_set(a, b, U, W):
 def check_1d(P, lo, hi):
     for B in P.inner:
         assert Fr(B[0, 0]) >= lo and Fr(B[0, 1]) <= hi
-    for B in P.outer:
+    for B in P.outside:
         assert Fr(B[0, 1]) < lo or Fr(B[0, 0]) > hi
 
 
@@ -129,7 +129,7 @@ def test_coupled_2d_inner_and_outer_are_sound(coupled_paving):
             assert in_coupled_set(c)
     # excluded boxes: sampled points (and corners) outside
     rng = np.random.default_rng(0)
-    for B in P.outer:
+    for B in P.outside:
         pts = list(itertools.product(*B)) + list(rng.uniform(B[:, 0], B[:, 1], (8, 2)))
         assert not any(in_coupled_set(p) for p in pts)
 
@@ -152,7 +152,7 @@ def test_witnesses_off_is_sound_but_excludes_less(coupled_paving):
                          options={"witnesses": False}, progress=False)
     for B in P.inner:
         assert all(in_coupled_set(c) for c in itertools.product(*B))
-    for B in P.outer:
+    for B in P.outside:
         assert not any(in_coupled_set(c) for c in itertools.product(*B))
     # points (1.5, 1.5): every single component can be met, only their coupling fails
     assert not P.contains(np.array([[1.5, 1.5]]), view="outside")[0]
@@ -168,7 +168,7 @@ def test_cannon_robust_one_step_set_by_sampling():
     P = quantified_sivia(f, cm.Box([-2, -2], [2, 2]), cm.Box([-2], [2]),
                          cm.Box([0.85], [0.95]), cm.Box([-0.5, -0.5], [0.5, 0.5]), 0.1,
                          progress=False)
-    assert len(P.inner) > 10 and len(P.outer) > 10
+    assert len(P.inner) > 10 and len(P.outside) > 10
     rng = np.random.default_rng(3)
     us = np.linspace(-2, 2, 4001)
     F = f.map(us.size)
@@ -181,7 +181,7 @@ def test_cannon_robust_one_step_set_by_sampling():
     for B in P.inner[rng.choice(len(P.inner), 25, replace=False)]:
         xp = rng.uniform(B[:, 0], B[:, 1])
         assert all(some_u(xp, w) for w in (0.85, 0.9, 0.95, rng.uniform(0.85, 0.95)))
-    for B in P.outer[rng.choice(len(P.outer), 25, replace=False)]:
+    for B in P.outside[rng.choice(len(P.outside), 25, replace=False)]:
         xp = rng.uniform(B[:, 0], B[:, 1])
         assert not all(some_u(xp, w) for w in np.linspace(0.85, 0.95, 11))
 

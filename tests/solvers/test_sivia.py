@@ -73,12 +73,12 @@ def corners(boxes):
 
 def assert_covers(paving, domain_volume):
     """inner, boundary and outside boxes tile the domain: volumes add up, no overlap."""
-    parts = [paving.inner, paving.boundary, paving.outer]
+    parts = [paving.inner, paving.boundary, paving.outside]
     each = sum(float(box_volume(b).sum()) for b in parts if len(b))
     union = paving.volume("inner") + paving.volume("boundary") + paving.volume("outside")
     assert each == pytest.approx(domain_volume, rel=1e-12)
     assert union == pytest.approx(domain_volume, rel=1e-12)
-    assert paving.n_discarded == len(paving.outer)
+    assert paving.n_discarded == len(paving.outside)
 
 
 @pytest.fixture(scope="module")
@@ -107,12 +107,12 @@ def test_routh_inner_boxes_are_stable(routh_pavings, eps):
 @pytest.mark.parametrize("eps", [0.5, 0.1, 0.05])
 def test_routh_outside_boxes_are_unstable(routh_pavings, eps):
     P = routh_pavings[eps]
-    assert len(P.outer) > 0
-    r = routh(samples(P.outer))  # (N, k*k, 3)
+    assert len(P.outside) > 0
+    r = routh(samples(P.outside))  # (N, k*k, 3)
     # one component of r is <= 0 on the whole box
     assert (r <= 0).all(axis=1).any(axis=1).all()
     if eps >= 0.1:
-        for cs in corners(P.outer):
+        for cs in corners(P.outside):
             vals = [routh_exact(*c) for c in cs]
             assert any(all(v[j] <= 0 for v in vals) for j in range(3))
 
@@ -140,7 +140,7 @@ def test_routh_random_points_agree_with_the_labels(routh_pavings):
     stable = (routh(pts) > 0).all(axis=1)
     for P in routh_pavings.values():
         in_inner = boxes_contain_points(P.inner, pts).any(axis=0)
-        in_outer = boxes_contain_points(P.outer, pts).any(axis=0)
+        in_outer = boxes_contain_points(P.outside, pts).any(axis=0)
         in_bnd = boxes_contain_points(P.boundary, pts).any(axis=0)
         assert (in_inner | in_outer | in_bnd).all()
         assert stable[in_inner].all()
@@ -151,7 +151,7 @@ def test_routh_fig41_box_counts(routh_pavings):
     # Fig 4.1 (eps = 0.5) with midpoint bisection and the natural inclusion; regression
     # figures of this deterministic run
     P = routh_pavings[0.5]
-    assert (len(P.inner), len(P.boundary), len(P.outer)) == (55, 83, 46)
+    assert (len(P.inner), len(P.boundary), len(P.outside)) == (55, 83, 46)
     assert P.volume("inner") == pytest.approx(105.890625)
     assert P.volume("boundary") == pytest.approx(11.671875)
 
@@ -159,7 +159,7 @@ def test_routh_fig41_box_counts(routh_pavings):
 def test_routh_from_casadi_function_equals_precompiled(F_routh, routh_pavings):
     P = cm.sivia(_routh_function(), X0_ROUTH, Y_POS, 0.5, open_target=True, progress=False)
     Q = routh_pavings[0.5]
-    for a, b in ((P.inner, Q.inner), (P.boundary, Q.boundary), (P.outer, Q.outer)):
+    for a, b in ((P.inner, Q.inner), (P.boundary, Q.boundary), (P.outside, Q.outside)):
         np.testing.assert_array_equal(a, b)
 
 
@@ -178,13 +178,13 @@ def test_split_ratio_049(F_routh, routh_pavings):
                  progress=False)
     assert P.status == Status.PROVED
     assert (routh(samples(P.inner)) > 0).all()
-    assert (routh(samples(P.outer)) <= 0).all(axis=1).any(axis=1).all()
+    assert (routh(samples(P.outside)) <= 0).all(axis=1).any(axis=1).all()
     assert_covers(P, AREA_ROUTH)
     Q = routh_pavings[0.1]
     assert len(P.inner) != len(Q.inner)  # a different (off-centre) subpaving
     assert P.volume("boundary") == pytest.approx(Q.volume("boundary"), rel=0.1)
     # the first cut is at 49 % of the first component
-    assert np.isin(-3 + 0.49 * 12, np.concatenate([P.inner, P.boundary, P.outer])[:, 0, :])
+    assert np.isin(-3 + 0.49 * 12, np.concatenate([P.inner, P.boundary, P.outside])[:, 0, :])
 
 
 def test_relative_eps_matches_a_rescaled_problem(routh_pavings):
@@ -197,8 +197,8 @@ def test_relative_eps_matches_a_rescaled_problem(routh_pavings):
     X0 = cm.Box([-3, -30], [9, 90])
     P = cm.sivia(f, X0, Y_POS, 0.5 / 12, relative=True, open_target=True, progress=False)
     Q = routh_pavings[0.5]
-    assert (len(P.inner), len(P.boundary), len(P.outer)) == (
-        len(Q.inner), len(Q.boundary), len(Q.outer))
+    assert (len(P.inner), len(P.boundary), len(P.outside)) == (
+        len(Q.inner), len(Q.boundary), len(Q.outside))
     assert P.volume("inner") == pytest.approx(10 * Q.volume("inner"))
     back = P.inner * np.array([1.0, 0.1])[None, :, None]
     assert (routh(samples(back)) > 0).all()
@@ -220,7 +220,7 @@ def test_closed_and_open_targets():
     assert closed.boundary[:, 0, 1].tolist() == [1.0]
     assert opened.volume("outside") == pytest.approx(1.0)
     assert opened.boundary[:, 0, 0].tolist() == [1.0]
-    assert opened.outer[:, 0, 1].max() == 1.0 and closed.inner[:, 0, 0].min() == 1.0
+    assert opened.outside[:, 0, 1].max() == 1.0 and closed.inner[:, 0, 0].min() == 1.0
 
 
 # ---------------------------------------------------------------- set targets
@@ -256,7 +256,7 @@ def test_polytope_target_identity():
     V = np.array([c for cs in corners(P.inner) for c in cs])
     assert _in_polytope_exact(HEXAGON, V).all()
     # outside boxes: no sample lies in the hexagon
-    S = samples(P.outer, k=5).reshape(-1, 2)
+    S = samples(P.outside, k=5).reshape(-1, 2)
     assert not HEXAGON.contains(S).any()
     assert_covers(P, 9.0)
     area = _shoelace(HEXAGON.vertices())
@@ -272,7 +272,7 @@ def test_polytope_target_nonlinear_image():
     img = samples(P.inner, k=5)
     img = np.stack([img[..., 0] + img[..., 1] ** 2, img[..., 1]], axis=-1).reshape(-1, 2)
     assert HEXAGON.contains(img, tol=1e-12).all()
-    out = samples(P.outer, k=5)
+    out = samples(P.outside, k=5)
     out = np.stack([out[..., 0] + out[..., 1] ** 2, out[..., 1]], axis=-1).reshape(-1, 2)
     assert not HEXAGON.contains(out).any()
     assert_covers(P, 8.0)
@@ -291,7 +291,7 @@ def test_polytope_union_target():
     # boxes straddling x1 = 0.2 are inside the union without being inside one member
     straddle = (P.inner[:, 0, 0] < 0.2) & (P.inner[:, 0, 1] > 0.2)
     assert straddle.any()
-    S = samples(P.outer, k=5).reshape(-1, 2)
+    S = samples(P.outside, k=5).reshape(-1, 2)
     assert not (A.contains(S) | B.contains(S)).any()
     assert_covers(P, 9.0)
     area = 1.2 * 2 + 0.5 * 2 * 1.2 - 0.5 * 2 * 0.2 * (1 - 0.2 / 1.2)  # |A| + |B| - |A ∩ B|
@@ -315,7 +315,7 @@ def test_undefined_function_parts_stay_undecided():
     f = ca.Function("root", [x], [ca.sqrt(x) - 1])
     P = cm.sivia(f, cm.Box([-1.0], [4.0]), cm.Box([0.0], [np.inf]), 0.01, progress=False)
     assert (P.inner[:, 0, 0] >= 1.0).all()
-    assert (P.outer[:, 0, 0] >= 0.0).all() and (P.outer[:, 0, 1] <= 1.0).all()
+    assert (P.outside[:, 0, 0] >= 0.0).all() and (P.outside[:, 0, 1] <= 1.0).all()
     assert P.volume("boundary") > 1.0  # [-1, 0] is never decided
     assert_covers(P, 5.0)
 
@@ -340,7 +340,7 @@ def test_max_boxes_stops_with_sound_leftovers(F_routh):
     assert P.status == Status.BUDGET and "max_boxes" in P.message
     assert P.n_classified <= 200
     assert (routh(samples(P.inner)) > 0).all()
-    assert (routh(samples(P.outer)) <= 0).all(axis=1).any(axis=1).all()
+    assert (routh(samples(P.outside)) <= 0).all(axis=1).any(axis=1).all()
     assert_covers(P, AREA_ROUTH)
     # leftovers are reported as boundary although wider than eps
     assert np.diff(P.boundary, axis=-1).max() > 0.05
@@ -371,7 +371,7 @@ def test_keyboard_interrupt_in_classifier_returns_partial_result(F_routh):
     assert out.levels == 3 and len(out.history) == 3
     assert len(out.boundary) == calls[3]  # the unclassified frontier of level 3
     P = cm.Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
-                  outer=out.outer.boxes, domain=X0_ROUTH, n_discarded=out.n_discarded)
+                  outside=out.outer.boxes, domain=X0_ROUTH, n_discarded=out.n_discarded)
     assert_covers(P, AREA_ROUTH)
     assert (routh(samples(P.inner)) > 0).all()
 
@@ -393,7 +393,7 @@ def test_keyboard_interrupt_after_contraction_keeps_a_tiling(F_routh, monkeypatc
     P = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.05, open_target=True, contract=True,
                  progress=False)
     assert P.status == Status.BUDGET and P.message == "interrupted"
-    assert len(P.outer) == P.n_discarded > 0  # slabs removed by the contractor included
+    assert len(P.outside) == P.n_discarded > 0  # slabs removed by the contractor included
     assert_covers(P, AREA_ROUTH)
     assert (routh(samples(P.inner)) > 0).all()
 
@@ -417,7 +417,7 @@ def test_keyboard_interrupt_while_splitting_keeps_a_tiling(F_routh):
     out = branch_and_bound(fr, image_classifier(F_routh, Y_POS, True), 0.05, progress=False)
     assert out.status == Status.BUDGET and out.levels == 2
     P = cm.Paving(inner=out.inner.boxes, boundary=out.boundary.boxes,
-                  outer=out.outer.boxes, n_discarded=out.n_discarded)
+                  outside=out.outer.boxes, n_discarded=out.n_discarded)
     assert_covers(P, AREA_ROUTH)  # no box of the interrupted level counted twice
 
 
@@ -532,7 +532,7 @@ def test_component_and_joint_evaluation_give_the_same_paving(F_routh, routh_pavi
     joint.component_evaluator = lambda j: None  # forces one evaluation of all outputs
     P = cm.sivia(joint, X0_ROUTH, Y_POS, 0.1, open_target=True, progress=False)
     Q = routh_pavings[0.1]
-    for view in ("inner", "boundary", "outer"):
+    for view in ("inner", "boundary", "outside"):
         a, b = getattr(P, view), getattr(Q, view)
         assert sorted(map(tuple, a.reshape(len(a), -1).tolist())) == \
             sorted(map(tuple, b.reshape(len(b), -1).tolist()))
@@ -546,7 +546,7 @@ def test_two_sided_targets_per_component():
     pts = samples(P.inner, 5).reshape(-1, 2)
     r2 = (pts ** 2).sum(axis=1)
     assert ((r2 >= 1) & (r2 <= 4) & (np.abs(pts[:, 0] - pts[:, 1]) <= 0.5)).all()
-    out = samples(P.outer, 5).reshape(-1, 2)
+    out = samples(P.outside, 5).reshape(-1, 2)
     r2 = (out ** 2).sum(axis=1)
     assert ((r2 < 1) | (r2 > 4) | (np.abs(out[:, 0] - out[:, 1]) > 0.5)).all()
     assert P.volume("inner") > 0.75 * 1.41  # two pieces of a band: area about 1.41
@@ -578,7 +578,7 @@ def test_contraction_keeps_the_routh_paving_sound(F_routh):
     assert P.status == Status.PROVED
     assert (routh(samples(P.inner)) > 0).all()
     # the removed slabs hold no solution: some component is <= 0 at every point
-    assert (routh(samples(P.outer)) <= 0).any(axis=2).all()
+    assert (routh(samples(P.outside)) <= 0).any(axis=2).all()
     assert_covers(P, AREA_ROUTH)
     plain = cm.sivia(F_routh, X0_ROUTH, Y_POS, 0.1, open_target=True, progress=False)
     assert P.volume("boundary") < plain.volume("boundary")

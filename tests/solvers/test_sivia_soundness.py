@@ -94,7 +94,7 @@ def test_contractor_slabs_do_not_claim_the_face_of_the_solution_set():
     f = ca.Function("f", [y], [y])
     for contract in (False, True):
         P = cm.sivia(f, cm.Box([0], [1]), cm.Box([0.5], [1]), eps=0.01, contract=contract)
-        on = (P.outer[:, 0, 0] <= 0.5) & (P.outer[:, 0, 1] >= 0.5)
+        on = (P.outside[:, 0, 0] <= 0.5) & (P.outside[:, 0, 1] >= 0.5)
         assert not on.any(), f"x = 0.5 is a solution but lies in the outer view ({contract=})"
         assert P.contains(np.array([[0.5]])).all()  # the views still cover the domain
 
@@ -146,7 +146,7 @@ def test_views_are_exact_on_affine_functions(n, seed, shift, scale, contract, op
     for box in P.inner[:20]:
         for p in _points(box, rng, 2):
             assert solution(p, open_target), f"inner point {p} is no solution"
-    for box in P.outer[:60]:
+    for box in P.outside[:60]:
         for p in _points(box, rng, 2):
             assert not solution(p, open_target), f"outer point {p} of {box.tolist()} is a solution"
 
@@ -161,7 +161,7 @@ def test_more_than_64_constrained_elements():
     bound = 0.5 / (1 + 0.01 * 99)  # the tightest constraint on each coordinate
     assert (np.abs(P.inner) <= bound).all()
     # the origin is a solution and must not be outer
-    assert not ((P.outer[:, :, 0] <= 0) & (P.outer[:, :, 1] >= 0)).all(axis=1).any()
+    assert not ((P.outside[:, :, 0] <= 0) & (P.outside[:, :, 1] >= 0)).all(axis=1).any()
 
 
 def test_overflowing_quotient_in_the_contractor_keeps_solutions():
@@ -173,7 +173,7 @@ def test_overflowing_quotient_in_the_contractor_keeps_solutions():
         for v in (740, 740.5, 741):
             assert 0 <= 1 / mpmath.exp(v) <= mpmath.mpf(1e-320)
     P = cm.sivia(f, cm.Box([740], [741]), cm.Box([0], [1e-320]), eps=0.1, contract=True)
-    assert P.outer.shape[0] == 0
+    assert P.outside.shape[0] == 0
     from casadi_cmpc.interval.contractor import contractor
 
     lo2, hi2, empty = contractor(f, [[0, 1e-320]])(np.array([[740.0]]), np.array([[741.0]]))

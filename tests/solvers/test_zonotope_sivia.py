@@ -83,8 +83,8 @@ def test_fig48_union_area_by_sampling(fig48):
 
 def test_fig48_discarded_outside(fig48):
     for res in fig48.values():
-        assert res.n_discarded == len(res.outer) > 0
-        pts = res.outer.sample(40, rng=1).reshape(-1, 2)
+        assert res.n_discarded == len(res.outside) > 0
+        pts = res.outside.sample(40, rng=1).reshape(-1, 2)
         assert not P_FIG48.contains(pts).any()
 
 
@@ -104,7 +104,7 @@ def test_inner_zonotopes_3d_and_1d():
     res = inner_zonotopes(P3, 0.2)
     assert len(res.inner) > 0
     assert P3.contains(res.inner.sample(20, rng=0).reshape(-1, 3)).all()
-    assert not P3.contains(res.outer.sample(20, rng=0).reshape(-1, 3)).any()
+    assert not P3.contains(res.outside.sample(20, rng=0).reshape(-1, 3)).any()
     P1 = cm.Polytope([[1.0], [-1.0]], [1.0, 2.0])
     res1 = inner_zonotopes(P1, 0.01)
     assert 2.95 < res1.volume() <= 3.0
@@ -200,7 +200,7 @@ def test_nonlinear_inner_and_outer_are_sound():
         assert res.success and len(res.inner) and res.n_discarded
         pin = res.inner.sample(30, rng=0).reshape(-1, 2)
         assert Y.contains(_eval(f, pin)).all()
-        pout = res.outer.sample(30, rng=0).reshape(-1, 2)
+        pout = res.outside.sample(30, rng=0).reshape(-1, 2)
         assert not Y.contains(_eval(f, pout)).any()
         # points of the domain outside inner ∪ boundary are not solutions, and vice versa
         areas.append(res.volume())
@@ -270,7 +270,7 @@ def test_union_target():
     res = zonotope_sivia(None, cm.Zonotope([0, 0], [[1.5, 0.3], [0.2, 1.5]]), U, 0.05)
     pts = res.inner.sample(20, rng=0).reshape(-1, 2)
     assert U.contains(pts).all() and res.volume() > 2.0
-    assert not U.contains(res.outer.sample(20, rng=0).reshape(-1, 2)).any()
+    assert not U.contains(res.outside.sample(20, rng=0).reshape(-1, 2)).any()
 
 
 # ----------------------------------------------------------------------------- E5, Fig 4.9
