@@ -171,11 +171,19 @@ class _Prover:
        cannot cover a point of P and are left out of the proof.
     3. :meth:`Polytope.is_subset` against the union of the remaining members.
 
+    For a union of boxes, step 3 is first tried on the grid of the boxes' bounds
+    (:meth:`casadi_cmpc.sets.paving._BoxGrid.polytope_inside`: every uncovered cell meeting
+    P's rigorous bounding box is proven disjoint from P), whose answer is final there.
+
     Only step 3 can answer True; steps 1-2 err toward "not proven" only.
     """
 
-    def __init__(self, members: list[Polytope], mboxes: np.ndarray, n_probe: int = 256
-                 ) -> None:
+    def __init__(self, members: list[Polytope], mboxes: np.ndarray, n_probe: int = 256,
+                 boxes: np.ndarray | None = None) -> None:
+        from ..sets.paving import _BoxGrid
+
+        # a union of boxes: the exact grid of their bounds decides most candidates fast
+        self.grid = _BoxGrid.build(boxes) if boxes is not None and boxes.shape[0] else None
         self.members = members
         self.mboxes = mboxes
         self.U = PolytopeUnion(members)
@@ -204,6 +212,11 @@ class _Prover:
             return False  # only the full-dimensional branch of is_subset is a proof
         if not np.all(self.U.contains(self._probes(P))):
             return False
+        if self.grid is not None:
+            self.proofs += 1
+            # the grid answer is final: a P it cannot prove touches an uncovered cell, which
+            # the exact covering would mostly refute at a much higher cost
+            return bool(self.grid.polytope_inside(P))
         bb = P.bounding_box().as_array()
         keep = ~((self.mboxes[:, :, 0] > bb[:, 1]) | (self.mboxes[:, :, 1] < bb[:, 0])
                  ).any(axis=1)
@@ -285,6 +298,56 @@ def _complement(H: Polytope, members: list[Polytope], boxes: np.ndarray,
             return None
         if not pieces:
             break
+    return pieces
+
+
+def _grid_complement(H: Polytope, grid: Any, max_pieces: int) -> list[Polytope] | None:
+    """``H`` minus the union for a union of boxes, from the grid of their bounds: the uncovered
+    cells meeting the (rigorous) bounding box of H, merged into runs along the first
+    coordinate, each intersected with H (None beyond ``max_pieces``). Heuristic like the
+    whole candidate construction: the final covering test decides."""
+    n = len(grid.edges)
+    D = np.vstack([np.eye(n), -np.eye(n)])
+    up = H._support_upper(D)
+    i0, i1 = [], []
+    for j in range(n):
+        e = grid.edges[j]
+        a = max(int(np.searchsorted(e, -up[n + j], side="left")) - 1, 0)
+        b = min(int(np.searchsorted(e, up[j], side="right")), e.size - 1)
+        i0.append(a)
+        i1.append(max(b, a + 1))
+    unc = ~grid.covered[tuple(slice(a, b) for a, b in zip(i0, i1, strict=True))]
+    # runs of uncovered cells along axis 0 (for fixed other indices)
+    runs = []
+    moved = np.moveaxis(unc, 0, -1)
+    for idx in np.ndindex(moved.shape[:-1]):
+        line = moved[idx]
+        k = 0
+        L = line.size
+        while k < L:
+            if line[k]:
+                k2 = k
+                while k2 + 1 < L and line[k2 + 1]:
+                    k2 += 1
+                runs.append((k, k2, idx))
+                k = k2 + 1
+            else:
+                k += 1
+        if len(runs) > 4 * max_pieces:
+            return None
+    pieces = []
+    for k, k2, idx in runs:
+        lo = np.empty(n)
+        hi = np.empty(n)
+        lo[0], hi[0] = grid.edges[0][i0[0] + k], grid.edges[0][i0[0] + k2 + 1]
+        for j in range(1, n):
+            c = idx[j - 1] + i0[j]
+            lo[j], hi[j] = grid.edges[j][c], grid.edges[j][c + 1]
+        P = Polytope(np.vstack([H.A, np.eye(n), -np.eye(n)]), np.concatenate([H.b, hi, -lo]))
+        if not P.is_empty() and P.is_full_dimensional():
+            pieces.append(P)
+        if len(pieces) > max_pieces:
+            return None
     return pieces
 
 
@@ -527,13 +590,14 @@ def inner_polytope(boxes: Any, method: str = "separating", *, eps: float = 1e-3,
                 f"center {x0.tolist()} is not proven interior to the union (a small box "
                 "around it is not covered): give a point well inside one of the members")
         centers = [(x0, "given")]
-    prove = _Prover(members, mboxes)
+    prove = _Prover(members, mboxes, boxes=arr)
     details: dict[str, Any] = {"method": method, "input": kind, "n_members": len(members),
                                "dim": n}
     claim = f"P ⊆ the union of the {len(members)} given sets (n = {n})"
     pieces: list[Polytope] = []
     if method == "separating":
-        C = _complement(H, members, mboxes, int(max_pieces))
+        C = (_grid_complement(H, prove.grid, int(max_pieces)) if prove.grid is not None
+             else _complement(H, members, mboxes, int(max_pieces)))
         if C is None:
             details.update(n_pieces=f"> {max_pieces}", n_tests=0, n_proofs=0, alpha=0.0,
                            center=centers[0][0].copy(), center_rule=centers[0][1],
