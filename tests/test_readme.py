@@ -6,7 +6,8 @@ import re
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def test_readme_python_blocks_run(capsys):
+def test_readme_python_blocks_run(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the examples write files
     text = (ROOT / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     assert blocks
@@ -15,6 +16,10 @@ def test_readme_python_blocks_run(capsys):
         exec(compile(b, "README.md", "exec"), ns)  # noqa: S102
     assert ns["res"].lower <= ns["res"].upper
     assert ns["paving"].n_inner > 0
+    # the controllable-set example: a certified robust control from E9's initial state
+    assert ns["r"].certificate.label == "verified" and ns["r"].horizon >= 1
+    assert ns["seq"].status == "converged" and ns["cert1"].proved is True
+    assert (tmp_path / "e9_sets.npz").is_file()
 
 
 def test_quickstart_test_command_is_what_ci_runs():
