@@ -18,7 +18,7 @@ def test_readme_python_blocks_run(capsys, tmp_path, monkeypatch):
     assert ns["paving"].n_inner > 0
     # the controllable-set example: a certified robust control from E9's initial state
     assert ns["r"].certificate.label == "verified" and ns["r"].horizon >= 1
-    assert ns["seq"].status == "converged" and ns["cert1"].proved is True
+    assert ns["seq9"].status == "converged" and ns["cert1"].proved is True
     assert (tmp_path / "e9_sets.npz").is_file()
 
 
