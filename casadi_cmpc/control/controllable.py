@@ -416,7 +416,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     --------
     >>> import casadi_cmpc as cm
     >>> ex = cm.models.load("cannon")                                  # doctest: +SKIP
-    >>> K1 = cm.one_step_set(ex.model, ex.info["terminal"], eps=0.05)  # doctest: +SKIP
+    >>> K1 = cm.one_step_set(ex.model, ex.terminal, eps=0.05)          # doctest: +SKIP
     """
     if not isinstance(model, Model):
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")

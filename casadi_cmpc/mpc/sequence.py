@@ -286,7 +286,10 @@ class SetSequenceMPC:
             polys = [M for M in _members(S) if isinstance(M, Polytope)]
             P = polys[-1]  # the latest polytope of K_j (P_j, or T)
             H[: P.A.shape[0]] = P.A
-            h[: P.b.shape[0]] = P.b
+            # tightened by 1e-6 of each row's scale, so that the optimum (on a facet) passes
+            # the interval check; the tightening claims nothing
+            scale = np.abs(P.A) @ np.maximum(np.abs(self.model.X.lo), np.abs(self.model.X.hi))
+            h[: P.b.shape[0]] = P.b - 1e-6 * np.maximum(scale, np.abs(P.b))
         p = np.concatenate([x, H.ravel(order="F"), h])
         lbx = np.concatenate([self.model.U.lo, [-np.inf]])
         ubx = np.concatenate([self.model.U.hi, [np.inf]])
