@@ -69,38 +69,30 @@ class SetUnion(SetBase):
 
         return {"view": "inner"} if isinstance(S, Paving) else {}
 
+    def _any(self, test: str, a: np.ndarray) -> np.ndarray:
+        """Per row of ``a``: some member answers True to ``S.<test>`` (members asked only
+        for the rows still False)."""
+        out = np.zeros(a.shape[0], dtype=bool)
+        for S in self.members:
+            und = np.flatnonzero(~out)
+            if und.size == 0:
+                break
+            out[und[np.asarray(getattr(S, test)(a[und], **self._kw(S)), dtype=bool)]] = True
+        return out
+
     def is_empty(self) -> bool:
         return all(S.is_empty(**self._kw(S)) for S in self.members)
 
     def contains(self, points: Any) -> np.ndarray | bool:
         p, batched = as_points(points, self._n, name="points")
-        out = np.zeros(p.shape[0], dtype=bool)
-        for S in self.members:
-            und = np.flatnonzero(~out)
-            if und.size == 0:
-                break
-            out[und[np.asarray(S.contains(p[und], **self._kw(S)), dtype=bool)]] = True
+        out = self._any("contains", p)
         return out if batched else bool(out[0])
 
     def contains_box(self, boxes: Any) -> np.ndarray:
-        b = as_boxes(boxes, self._n, "boxes")
-        out = np.zeros(b.shape[0], dtype=bool)
-        for S in self.members:
-            und = np.flatnonzero(~out)
-            if und.size == 0:
-                break
-            out[und[np.asarray(S.contains_box(b[und], **self._kw(S)), dtype=bool)]] = True
-        return out
+        return self._any("contains_box", as_boxes(boxes, self._n, "boxes"))
 
     def intersects_box(self, boxes: Any) -> np.ndarray:
-        b = as_boxes(boxes, self._n, "boxes")
-        out = np.zeros(b.shape[0], dtype=bool)
-        for S in self.members:
-            und = np.flatnonzero(~out)
-            if und.size == 0:
-                break
-            out[und[np.asarray(S.intersects_box(b[und], **self._kw(S)), dtype=bool)]] = True
-        return out
+        return self._any("intersects_box", as_boxes(boxes, self._n, "boxes"))
 
     def support(self, directions: Any) -> np.ndarray | float:
         vals = [np.asarray(S.support(directions, **self._kw(S)), dtype=float)

@@ -72,6 +72,14 @@ class Frontier(Protocol):
     def concat(parts: list[Any]) -> Any: ...
 
 
+def _concat_data(parts: list[Any]) -> dict[str, np.ndarray] | None:
+    """The per-element data of frontier parts joined, or None unless all have the same keys."""
+    keys = [None if p.data is None else set(p.data) for p in parts]
+    if keys[0] is None or any(k != keys[0] for k in keys):
+        return None
+    return {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
+
+
 def _widest(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per row of ``w`` (N, n): the largest entry and the lowest index holding it.
 
@@ -215,12 +223,8 @@ class BoxFrontier:
     def concat(parts: list[BoxFrontier]) -> BoxFrontier:
         if not parts:
             raise ValueError("nothing to concatenate")
-        data = None
-        keys = [None if p.data is None else set(p.data) for p in parts]
-        if keys[0] is not None and all(k == keys[0] for k in keys):
-            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
         return parts[0]._with(np.concatenate([p.lo for p in parts]),
-                              np.concatenate([p.hi for p in parts]), data)
+                              np.concatenate([p.hi for p in parts]), _concat_data(parts))
 
 
 @dataclass
@@ -648,13 +652,9 @@ class PairFrontier:
     @staticmethod
     def _join(parts: list[PairFrontier]) -> PairFrontier:
         """Join parts of one frontier (group ids kept as they are)."""
-        data = None
-        keys = [None if p.data is None else set(p.data) for p in parts]
-        if keys[0] is not None and all(k == keys[0] for k in keys):
-            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
         return parts[0]._with(np.concatenate([p.lo for p in parts]),
                               np.concatenate([p.hi for p in parts]),
-                              np.concatenate([p.group for p in parts]), data)
+                              np.concatenate([p.group for p in parts]), _concat_data(parts))
 
     @staticmethod
     def concat(parts: list[PairFrontier]) -> PairFrontier:
@@ -662,15 +662,9 @@ class PairFrontier:
         distinct."""
         if not parts:
             raise ValueError("nothing to concatenate")
-        groups, off = [], 0
+        shifted, off = [], 0
         for p in parts:
-            groups.append(p.group + off)
+            shifted.append(p._with(p.lo, p.hi, p.group + off, p.data))
             if len(p):
                 off += int(p.group.max()) + 1
-        data = None
-        keys = [None if p.data is None else set(p.data) for p in parts]
-        if keys[0] is not None and all(k == keys[0] for k in keys):
-            data = {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
-        return parts[0]._with(np.concatenate([p.lo for p in parts]),
-                              np.concatenate([p.hi for p in parts]),
-                              np.concatenate(groups), data)
+        return PairFrontier._join(shifted)
