@@ -421,7 +421,18 @@ class PairFrontier:
     :meth:`split` bisects, per group, the control cells while one of them can be split
     (widest component relative to ``u_scale``: a per-dimension split mask), and otherwise
     the state box (widest component relative to ``x_scale``); both halves of a state box
-    inherit the hull of the surviving cells of their group (one cell each).
+    inherit the hull of the surviving cells of their group (one cell each), or, with
+    ``restart`` set, the whole control box with the per-pair data of ``restart`` (the
+    nested search starts again for each state box, as in thesis Alg 5.2).
+
+    **Shared exclusion.** With ``shared`` naming a data key of shape (N, C), a pair label
+    ``OUTER`` only drops the cell, and a group is outside when there is a column ``c`` at
+    which every pair of the group is excluded (``data[shared][k, c]`` or labelled
+    ``OUTER``; the classifier labels a pair ``OUTER`` only when its cell is excluded at
+    every column). This is the exclusion of ``for all w exists u``: the columns are points
+    of W shared by all cells of a state box, and a cell may be dropped only when it fails at
+    all of them, so that the dropped cells and the live ones still cover the control box
+    at each column.
 
     Attributes
     ----------
@@ -438,6 +449,13 @@ class PairFrontier:
     data : dict of ndarray, optional
         Per-pair arrays (first axis N) kept by :meth:`take_done`, so proven pairs keep what
         the classifier wrote (e.g. ``"witness"``, the proving control, ``(N, m)``).
+    u_box : ndarray (m, 2)
+        The control box.
+    restart : dict of ndarray, optional
+        Per-pair data (first axis 1) given to the pairs of newly split state boxes, whose
+        cell is then the whole control box (see the class notes); None: inherit the hull.
+    shared : str, optional
+        Data key of the shared exclusion columns (see the class notes).
     """
 
     lo: np.ndarray
@@ -450,14 +468,20 @@ class PairFrontier:
     max_cells: int = 64
     split_ratio: float = 0.5
     data: dict[str, np.ndarray] | None = None
+    u_box: np.ndarray | None = None
+    restart: dict[str, np.ndarray] | None = None
+    shared: str | None = None
     _u_mode: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_boxes(cls, X: np.ndarray, U: np.ndarray, *, x_scale: np.ndarray | None = None,
                    u_eps: float = 0.05, max_cells: int = 64,
-                   data: dict[str, np.ndarray] | None = None) -> PairFrontier:
+                   data: dict[str, np.ndarray] | None = None,
+                   restart: dict[str, np.ndarray] | None = None,
+                   shared: str | None = None, split_ratio: float = 0.5) -> PairFrontier:
         """One pair per state box ``X`` (N, n, 2), each with the whole control box ``U``
-        (m, 2); ``data`` arrays (first axis N) are attached."""
+        (m, 2); ``data`` arrays (first axis N) are attached; ``restart`` and ``shared``:
+        see the class notes."""
         X = np.asarray(X, dtype=float)
         U = np.asarray(U, dtype=float).reshape(-1, 2)
         N, n = X.shape[0], X.shape[1]
@@ -468,9 +492,14 @@ class PairFrontier:
         u_scale = np.where(du > 0, du, 1.0)
         if x_scale is None:
             x_scale = np.ones(n)
+        if restart is not None:
+            restart = {k: np.asarray(v)[:1] for k, v in restart.items()}
+        if shared is not None and (data is None or shared not in data):
+            raise ValueError(f"the shared exclusion key {shared!r} is not in data")
         return cls(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
                    np.arange(N, dtype=np.intp), n, np.asarray(x_scale, dtype=float), u_scale,
-                   float(u_eps), int(max_cells), data=data)
+                   float(u_eps), int(max_cells), float(split_ratio), data=data,
+                   u_box=U.copy(), restart=restart, shared=shared)
 
     def __len__(self) -> int:
         return self.lo.shape[0]
@@ -498,7 +527,8 @@ class PairFrontier:
               data: dict[str, np.ndarray] | None, u_mode: np.ndarray | None = None
               ) -> PairFrontier:
         return PairFrontier(lo, hi, group, self.n, self.x_scale, self.u_scale, self.u_eps,
-                            self.max_cells, self.split_ratio, data, u_mode)
+                            self.max_cells, self.split_ratio, data, self.u_box, self.restart,
+                            self.shared, u_mode)
 
     def take(self, mask: np.ndarray) -> PairFrontier:
         idx = np.asarray(mask)
@@ -540,9 +570,15 @@ class PairFrontier:
         G = int(g.max()) + 1
         inner = labels == INNER
         outer = labels == OUTER
-        cnt = np.bincount(g, minlength=G)
         g_in = np.bincount(g, weights=inner, minlength=G) > 0
-        g_out = (np.bincount(g, weights=outer, minlength=G) == cnt) & ~g_in
+        if self.shared is None:
+            cnt = np.bincount(g, minlength=G)
+            g_out = (np.bincount(g, weights=outer, minlength=G) == cnt) & ~g_in
+        else:  # a column at which every cell of the group is excluded
+            E = np.asarray(self.data[self.shared], dtype=bool) | outer[:, None]
+            miss = np.zeros((G, E.shape[1]), dtype=np.int64)
+            np.add.at(miss, g, ~E)
+            g_out = (miss == 0).any(axis=1) & ~g_in
         rep_in = _group_first(g, inner, G)[g_in]
         out[rep_in] = INNER
         out[_group_first(g, np.ones(N, dtype=bool), G)[g_out]] = OUTER
@@ -616,6 +652,11 @@ class PairFrontier:
             first = _group_first(inv, np.ones(len(P), dtype=bool), G)
             data = None if P.data is None else {
                 key: v.take(first, axis=0) for key, v in P.data.items()}
+            if self.restart is not None:  # the nested search starts again from U
+                lo[:, n:] = self.u_box[:, 0]
+                hi[:, n:] = self.u_box[:, 1]
+                data = dict(data or {})
+                data.update({key: np.repeat(v, G, axis=0) for key, v in self.restart.items()})
             H = self._with(lo, hi, ug, data)
             wx, k = _widest(H._x_widths())
             rows = np.arange(G)

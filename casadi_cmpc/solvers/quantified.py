@@ -4,16 +4,20 @@ Paves the set
 
     Σ = { x ∈ X0 : ∀ w ∈ W  ∃ u ∈ U :  f(x, u, w) ∈ Y }
 
-with one classifier plugged into the batched branch-and-bound engine
-(:func:`~casadi_cmpc.solvers.engine.branch_and_bound`). The classifier uses the inner and
-outer approximations of the semantic extension ``f*`` computed by
-:class:`~casadi_cmpc.interval.modal.SemanticExtension`, with ``x`` and ``w`` proper
-(universally quantified) and ``u`` improper (existentially quantified), and, for Alg 5.2, a
-nested bisection of ``U`` vectorised over the whole frontier.
+with one pair classifier plugged into the batched branch-and-bound engine
+(:func:`~casadi_cmpc.solvers.engine.branch_and_bound` over a
+:class:`~casadi_cmpc.solvers.engine.PairFrontier` of (x-box, U-cell) pairs, the frontier of
+the one-step sets too). The classifier uses the inner and outer approximations of the
+semantic extension ``f*`` computed by :class:`~casadi_cmpc.interval.modal.SemanticExtension`,
+with ``x`` and ``w`` proper (universally quantified) and ``u`` improper (existentially
+quantified). For Alg 5.2 the U-cells of each x-box are bisected breadth-first, batched over
+the whole frontier; each new x-box starts again from the whole U, and its shared exclusion
+columns (points of W) make the frontier's group reduction sound for ``∀w ∃u``.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -27,7 +31,7 @@ from ..model import Model
 from ..sets.box import Box
 from ..sets.paving import Paving
 from ._common import positive_eps, split_inclusion
-from .engine import INNER, OUTER, BoxFrontier, branch_and_bound
+from .engine import INNER, OUTER, PairFrontier, branch_and_bound
 from .result import SetResult
 
 __all__ = ["quantified_sivia"]
@@ -82,9 +86,15 @@ def _bounded_box(data: Any, d: int, name: str) -> np.ndarray:
 
 
 class _QuantifiedClassifier:
-    """Classifier of x-boxes for ``∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y``.
+    """Pair classifier of ``∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y`` on a
+    :class:`~casadi_cmpc.solvers.engine.PairFrontier` (x-box, U-cell).
 
-    Columns of the joint boxes: x (0..n-1), u (n..n+m-1), w (n+m..d-1).
+    Columns of the joint boxes: x (0..n-1), u (n..n+m-1), w (n+m..d-1). Per-pair data:
+    ``"wc"`` (N, C, l), the points of W shared by the cells of a state box (NaN until the
+    box is first classified, with the whole U as its cell); ``"excl"`` (N, C'), the cell is
+    proven excluded at column c (C' = max(C, 1); with no w, column 0 is the exclusion
+    itself; without witnesses it only records a whole-U exclusion); ``"useless"`` (N,),
+    the cell is excluded at some w of its own and cannot prove the box.
     """
 
     def __init__(self, ext: SemanticExtension, n: int, m: int, l: int, U: np.ndarray,
@@ -97,9 +107,8 @@ class _QuantifiedClassifier:
         self.W = W
         self.ylo = Y.lo
         self.yhi = Y.hi
-        self.u_depth = opts["u_depth"] if m > 0 else 0
-        self.max_pairs = opts["max_pairs"]
-        self.witnesses = opts["witnesses"]
+        self.witnesses = opts["witnesses"] and l > 0
+        self.C = 2 * self.p if self.witnesses else 0
         self.us = slice(n, n + m)
         self.ws = slice(n + m, self.d)
         self.imp_u = np.zeros(self.d, dtype=bool)
@@ -107,16 +116,15 @@ class _QuantifiedClassifier:
         self.imp_xu = np.zeros(self.d, dtype=bool)
         self.imp_xu[: n + m] = True
         self.imp_none = np.zeros(self.d, dtype=bool)
-        du = U[:, 1] - U[:, 0]
-        self.u_scale = np.where(du > 0, du, 1.0)
-        self.n_pairs = 0  # U-cells examined in total (statistics)
+        self.n_pairs = 0  # (x-box, U-cell) pairs examined in total (statistics)
+
+    def fresh_data(self, N: int) -> dict[str, np.ndarray]:
+        """Per-pair data of N state boxes whose cell is the whole U."""
+        return {"wc": np.full((N, self.C, self.l), np.nan),
+                "excl": np.zeros((N, max(self.C, 1)), dtype=bool),
+                "useless": np.zeros(N, dtype=bool)}
 
     # ------------------------------------------------------------------ helpers
-    def _assemble(self, X: np.ndarray, Uc: np.ndarray) -> np.ndarray:
-        P = Uc.shape[0]
-        Wb = np.broadcast_to(self.W, (P, self.l, 2))
-        return np.concatenate([X, Uc, Wb], axis=1)
-
     def _inside(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Outer approximation ``[lo, hi]`` (modal) included in Y, per output: (P, p).
 
@@ -129,7 +137,7 @@ class _QuantifiedClassifier:
         return ((lo < self.ylo) | (hi > self.yhi)).any(axis=-1)
 
     def _witness_points(self, J0: np.ndarray) -> np.ndarray:
-        """Candidate points of W per x-box: (N, C, l).
+        """Candidate points of W per x-box from its Jacobian over X x U x W: (N, C, l).
 
         For each output j, the corner of W minimising f_j and the one maximising it (by the
         sign of the interval derivative over X x U x W; the midpoint where it is unknown).
@@ -144,117 +152,55 @@ class _QuantifiedClassifier:
         return np.concatenate([low, high], axis=1)
 
     # --------------------------------------------------------------------- classify
-    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+    def __call__(self, fr: PairFrontier) -> np.ndarray:
         with np.errstate(all="ignore"):
             return self._classify(fr)
 
-    def _classify(self, fr: BoxFrontier) -> np.ndarray:
-        ext = self.ext
-        X = fr.boxes
-        N = X.shape[0]
-        labels = np.zeros(N, dtype=np.int8)
-        if N == 0:
+    def _classify(self, fr: PairFrontier) -> np.ndarray:
+        ext, n = self.ext, self.n
+        P = len(fr)
+        labels = np.zeros(P, dtype=np.int8)
+        if P == 0:
             return labels
-        cells = np.broadcast_to(self.U, (N, self.m, 2)).copy()
-        Z = self._assemble(X, cells)
+        self.n_pairs += P
+        data = fr.data
+        Z = np.concatenate([fr.boxes, np.broadcast_to(self.W, (P, self.l, 2))], axis=1)
         J = ext.jacobian_unchecked(Z)
-        # Exclusion witnesses: points of W shared by all U-cells of an x-box. With no w,
-        # the single (empty) witness makes the exclusion test of every cell global.
-        if self.l == 0:
-            C = 1
-            cands = None
-        elif self.witnesses:
-            cands = self._witness_points(J)
-            C = cands.shape[1]
-        else:
-            C = 0
-            cands = None
-        idx = np.arange(N)
-        mask = np.zeros((N, C), dtype=bool)  # cell proven excluded at witness c
-        useless = np.zeros(N, dtype=bool)  # cell cannot serve as the ∃u witness
-        frozen = np.zeros((N, C), dtype=np.int64)  # non-excluded cells no longer refined
-        proven = np.zeros(N, dtype=bool)
-        outer = np.zeros(N, dtype=bool)
-        for depth in range(self.u_depth + 1):
-            P = idx.size
-            if P == 0:
-                break
-            self.n_pairs += P
-            if depth > 0:
-                Z = self._assemble(X[idx], cells)
-                J = ext.jacobian_unchecked(Z)
-            # --- exclusion (inner approximations, x and u improper) -------------------
-            # own: w proper, its points chosen per cell (thesis Alg 5.2 step 12; Alg 5.1
-            # step 5 for the whole U); witnesses: w fixed to a point shared by all cells
-            Zs = [Z]
-            Js = [J]
-            if cands is not None:
-                for c in range(C):
-                    Zc = Z.copy()
-                    wc = cands[idx, c]
-                    Zc[:, self.ws, 0] = wc
-                    Zc[:, self.ws, 1] = wc
-                    Zs.append(Zc)
-                    Js.append(J)
-            r = ext.bounds_unchecked(np.concatenate(Zs), self.imp_xu, np.concatenate(Js),
-                                     outer=False, inner=True)
-            ex = self._excluded(r["inner_lo"], r["inner_hi"]).reshape(len(Zs), P)
-            excl_own = ex[0]
-            if self.l == 0:
-                mask[:, 0] |= excl_own
-            elif cands is not None:
-                mask |= ex[1:].T
-            if depth == 0:
-                # the cell is all of U: ∃w ∀x ∀u f ∉ Y, so no x of the box is in Σ
-                outer[idx[excl_own]] = True
-            useless |= excl_own
-            if C:
-                useless |= mask.any(axis=1)
-            # --- inclusion (outer approximations, u improper) ---------------------------
-            sel = np.flatnonzero(~useless & ~outer[idx] & ~proven[idx])
-            if sel.size:
-                ok = self._included(Z[sel], J[sel])
-                proven[idx[sel[ok]]] = True
-            # --- exclusion of whole x-boxes through a shared witness --------------------
-            if C:
-                notexcl = frozen.copy()
-                np.add.at(notexcl, idx, (~mask).astype(np.int64))
-                outer |= (notexcl == 0).any(axis=1) & ~proven
-            # --- keep the cells worth refining ------------------------------------------
-            alive = ~proven[idx] & ~outer[idx]
-            if C:
-                alive &= ~mask.all(axis=1)  # excluded at every witness: counts as excluded
-            else:
-                alive &= ~useless
-            idx, cells, mask, useless = idx[alive], cells[alive], mask[alive], useless[alive]
-            if depth == self.u_depth or idx.size == 0:
-                break
-            # --- bisect the U-cells (widest component relative to U) --------------------
-            lo, hi = cells[..., 0], cells[..., 1]
-            k = np.argmax((hi - lo) / self.u_scale, axis=1)
-            rows = np.arange(idx.size)
-            a, b = lo[rows, k], hi[rows, k]
-            cpt = np.clip(0.5 * a + 0.5 * b, a, b)
-            can = (a < cpt) & (cpt < b)
-            if 2 * int(can.sum()) > self.max_pairs:
-                can[:] = False
-            if not can.all():
-                if C:
-                    np.add.at(frozen, idx[~can], (~mask[~can]).astype(np.int64))
-                idx, cells, mask, useless = idx[can], cells[can], mask[can], useless[can]
-                rows, k, cpt = rows[: idx.size], k[can], cpt[can]
-                if idx.size == 0:
-                    break
-            left = cells.copy()
-            right = cells.copy()
-            left[rows, k, 1] = cpt
-            right[rows, k, 0] = cpt
-            idx = np.concatenate([idx, idx])
-            cells = np.concatenate([left, right])
-            mask = np.concatenate([mask, mask])
-            useless = np.concatenate([useless, useless])
-        labels[outer] = OUTER
-        labels[proven] = INNER
+        whole = ((fr.lo[:, n:] == self.U[:, 0]) & (fr.hi[:, n:] == self.U[:, 1])).all(axis=1)
+        if self.C:
+            new = np.isnan(data["wc"][:, 0, 0])  # a state box classified for the first time
+            if new.any():  # its cell is the whole U: J is over X x U x W
+                data["wc"][new] = self._witness_points(J[new])
+        # --- exclusion (inner approximations, x and u improper) -------------------------
+        # own: w proper (thesis Alg 5.2 step 12; Alg 5.1 step 5 for the whole U);
+        # columns: w fixed to a point shared by all cells of the state box
+        Zs = [Z]
+        for c in range(self.C):
+            Zc = Z.copy()
+            wc = data["wc"][:, c]
+            Zc[:, self.ws, 0] = wc
+            Zc[:, self.ws, 1] = wc
+            Zs.append(Zc)
+        r = ext.bounds_unchecked(np.concatenate(Zs), self.imp_xu,
+                                 np.concatenate([J] * len(Zs)), outer=False, inner=True)
+        ex = self._excluded(r["inner_lo"], r["inner_hi"]).reshape(len(Zs), P)
+        own = ex[0]
+        excl = data["excl"]
+        if self.C:
+            excl |= ex[1:].T
+        elif self.l == 0:
+            excl[:, 0] |= own  # no w: the exclusion holds for every w
+        # the cell is all of U: ∃w ∀x ∀u f ∉ Y, so no x of the box is in the set
+        excl[whole & own] = True
+        useless = data["useless"]
+        useless |= own | excl.any(axis=1)
+        # --- inclusion (outer approximations, u improper) -------------------------------
+        sel = np.flatnonzero(~useless)
+        if sel.size:
+            ok = self._included(Z[sel], J[sel])
+            labels[sel[ok]] = INNER
+        # a cell excluded at every column is dropped; the others stay to be refined
+        labels[excl.all(axis=1) & (labels != INNER)] = OUTER
         return labels
 
     def _included(self, Z: np.ndarray, J: np.ndarray) -> np.ndarray:
@@ -335,9 +281,11 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
         ``"alg5.2"``: Alg 5.2 with the nested bisection of ``U``, any ``p``. ``"auto"``:
         ``"alg5.2"`` (for a scalar ``f`` it contains Alg 5.1 as its first step).
     options : dict, optional
-        ``u_depth`` (int, default 8): rounds of bisection of the U-cells per x-box (Alg 5.2);
-        ``max_pairs`` (int, default 200000): largest number of (x-box, U-cell) pairs examined
-        at once (beyond it the nested search stops: sound, less sharp);
+        ``u_depth`` (int, default 8): bisection rounds of U per x-box (Alg 5.2): cells are
+        bisected down to ``2**-ceil(u_depth / m)`` of U per component, at most
+        ``2**u_depth`` cells per x-box;
+        ``max_pairs`` (int, default 200000): a lower cap on the number of U-cells per x-box
+        (beyond it the cells are not bisected further: sound, less sharp);
         ``witnesses`` (bool, default True): exclude x-boxes through points of W shared by
         all U-cells (see Notes); ``mean_value`` (bool, default True): combine the
         monotonicity bounds with the modal mean-value extension. Unknown keys warn.
@@ -346,7 +294,8 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
     relative : bool
         Measure widths relative to ``X0``.
     max_boxes, time_limit : optional
-        Limits; a stopped search reports its leftovers as boundary boxes (still sound).
+        Limits (``max_boxes`` counts classified (x-box, U-cell) pairs); a stopped search
+        reports its leftovers as boundary boxes (still sound).
     keep_outer : bool
         Keep the excluded boxes (``result.outside``) for drawing.
     progress : bool or None
@@ -466,10 +415,20 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
     scale = None
     if relative:
         scale = np.where(domain.diam > 0, domain.diam, 1.0)
-    fr = BoxFrontier.from_boxes(x0[None], scale=scale, split_ratio=split_ratio)
+    u_depth = opts["u_depth"] if m > 0 else 0
+    # u_depth bisection rounds of U: cells down to 2^-ceil(u_depth / m) of U per component,
+    # at most 2^u_depth (and max_pairs) cells per state box
+    u_eps = 2.0 ** -math.ceil(u_depth / max(m, 1))
+    fr = PairFrontier.from_boxes(x0[None], ub, x_scale=scale, u_eps=u_eps,
+                                 max_cells=max(1, min(2 ** min(u_depth, 62), opts["max_pairs"])),
+                                 data=classify.fresh_data(1), restart=classify.fresh_data(1),
+                                 shared="excl", split_ratio=split_ratio)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=keep_outer, progress=progress, desc="quantified sivia")
-    paving = Paving._from_solver(out.inner.boxes, out.boundary.boxes, out.outer.boxes, domain,
+    bnd = out.boundary.x_boxes
+    if bnd.shape[0]:  # leftovers of a stopped search hold several cells per state box
+        bnd = np.unique(bnd, axis=0)
+    paving = Paving._from_solver(out.inner.x_boxes, bnd, out.outer.x_boxes, domain,
                                  out.n_discarded)
     return SetResult(status=out.status, message=out.message, method=meth, nit=out.levels,
                      n_boxes=out.n_classified, elapsed=out.elapsed, paving=paving,

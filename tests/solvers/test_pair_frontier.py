@@ -1,6 +1,7 @@
 """The pair frontier of nested existential searches: group reduction and splitting."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -112,3 +113,51 @@ def test_search_exists_u_on_a_scalar_problem(a, c, eps):
     # the pieces cover [0, 1] (inner, outer, boundary together)
     allb = np.concatenate([inner, outer, out.boundary.x_boxes[:, 0]])
     assert np.isclose((allb[:, 1] - allb[:, 0]).sum(), 1.0)
+
+
+def _shared_frontier(groups, excl):
+    N = len(groups)
+    fr = _frontier(groups)
+    fr.data["excl"] = np.asarray(excl, dtype=bool).reshape(N, -1)
+    fr.shared = "excl"
+    return fr
+
+
+def test_shared_exclusion_needs_one_common_column():
+    # group 0: cells excluded at different columns only (for all w exists u may hold);
+    # group 1: both cells excluded at column 1; group 2: one cell dropped (every column),
+    # the other excluded at column 0
+    fr = _shared_frontier([0, 0, 1, 1, 2, 2],
+                          [[1, 0], [0, 1], [0, 1], [1, 1], [1, 1], [1, 0]])
+    labels = np.array([UNDECIDED, UNDECIDED, UNDECIDED, OUTER, OUTER, UNDECIDED],
+                      dtype=np.int8)
+    out, _ = fr.reduce(labels, eps=0.01)
+    assert (out[:2] == UNDECIDED).all()
+    assert (out[2:4] == OUTER).sum() == 1 and (out[4:] == OUTER).sum() == 1
+    # without the shared key, "all pairs outer" is the rule (exists u for all w)
+    out2, _ = _frontier([0, 0, 1, 1, 2, 2]).reduce(labels, eps=0.01)
+    assert (out2 != OUTER).all()
+
+
+def test_restart_gives_new_state_boxes_the_whole_control_box_and_fresh_data():
+    fresh = {"excl": np.zeros((1, 2), dtype=bool), "tag": np.zeros(1)}
+    fr = PairFrontier.from_boxes(np.array([[[0.0, 1.0]]]), np.array([[-1.0, 1.0]]),
+                                 u_eps=0.6, max_cells=16,
+                                 data={"excl": np.zeros((1, 2), dtype=bool),
+                                       "tag": np.ones(1)},
+                                 restart=fresh, shared="excl")
+    out, _ = fr.reduce(np.zeros(1, dtype=np.int8), eps=0.01)
+    fr = fr.take(out == UNDECIDED).split()[0]  # cells [-1, 0], [0, 1]
+    fr.data["excl"][0] = True
+    lab = np.array([OUTER, UNDECIDED], dtype=np.int8)  # the first cell is dropped
+    out, _ = fr.reduce(lab, eps=0.01)
+    ch = fr.take(out == UNDECIDED).split()[0]  # cells narrow: the state box splits
+    assert len(np.unique(ch.group)) == 2
+    assert (ch.u_cells[:, 0] == [-1.0, 1.0]).all()  # not the hull [0, 1] of the survivor
+    assert (ch.data["tag"] == 0).all() and not ch.data["excl"].any()
+
+
+def test_shared_key_must_be_in_data():
+    with pytest.raises(ValueError, match="shared"):
+        PairFrontier.from_boxes(np.array([[[0.0, 1.0]]]), np.array([[-1.0, 1.0]]),
+                                data={"witness": np.zeros((1, 1))}, shared="excl")

@@ -233,3 +233,38 @@ def test_errors_and_warnings():
         quantified_sivia(SUM, box, box, box, box, 0.5, options={"u_depth": 2},
                          progress=False)
 
+
+
+# ====================================================== coupled outputs, any magnitudes
+def _coupled_oracle(p, a, b, r, t):
+    """∀w ∈ [-r, r] ∃u ∈ [-1, 1]: x1 + a u + w ∈ [-1, 1] and x2 - b u ∈ [t - 1, t + 1]
+    (a, b > 0), decided exactly: the u-intervals of the three constraints meet for every w
+    iff they meet at w = ±r (max of the lower ends minus min of the upper ends is convex
+    in w)."""
+    x, y = Fr(p[0]), Fr(p[1])
+    a, b, r, t = Fr(a), Fr(b), Fr(r), Fr(t)
+    for w in (-r, r):
+        lo = max((-1 - x - w) / a, (y - t - 1) / b, Fraction(-1))
+        hi = min((1 - x - w) / a, (y - t + 1) / b, Fraction(1))
+        if lo > hi:
+            return False
+    return True
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(a=st.floats(0.3, 3), b=st.floats(0.3, 3), r=st.floats(0, 0.6), t=st.floats(-2, 2),
+       witnesses=st.booleans())
+def test_coupled_outputs_sound_for_all_w_exists_u(a, b, r, t, witnesses):
+    """The class of the shared-witness exclusion: an x-box is outside only through a point
+    of W at which every U-cell fails; inner boxes hold for every w with some u."""
+    f = ca.Function("cp", [X2, u1, w1], [ca.vertcat(X2[0] + a * u1 + w1, X2[1] - b * u1)])
+    D = cm.Box([-4, t - 4], [4, t + 4])
+    P = quantified_sivia(f, D, cm.Box([-1], [1]), cm.Box([-r], [r]),
+                         cm.Box([-1, t - 1], [1, t + 1]), 0.25, relative=False,
+                         options={"witnesses": witnesses}, progress=False)
+    for B in P.inner:  # the exact set is convex: corners suffice
+        assert all(_coupled_oracle(c, a, b, r, t) for c in itertools.product(*B))
+    rng = np.random.default_rng(0)
+    for B in P.outside[: 60]:
+        pts = list(itertools.product(*B)) + list(rng.uniform(B[:, 0], B[:, 1], (4, 2)))
+        assert not any(_coupled_oracle(p, a, b, r, t) for p in pts)
