@@ -7,7 +7,7 @@ Conventional aliases used throughout the documentation::
     import casadi_cmpc as cm
 """
 
-from . import interval  # noqa: F401
+from . import codegen, interval  # noqa: F401
 from .control import *  # noqa: F401,F403
 from .control import __all__ as _control_all  # noqa: F401
 from .exceptions import *  # noqa: F401,F403
@@ -32,5 +32,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'casadi_cmpc' has no attribute '{name}'")
 
 
-__all__ = (["interval"] + list(_exc_all) + list(_model_all) + list(_sets_all)
+__all__ = (["interval", "codegen"] + list(_exc_all) + list(_model_all) + list(_sets_all)
            + list(_solvers_all) + list(_control_all) + list(_mpc_all))

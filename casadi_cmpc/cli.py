@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -330,6 +331,73 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _export(args: Any) -> int:
+    """``cmpc export``: the example's controller (solver sqp) written as C."""
+    from . import models
+    from .codegen import build, export_c
+    from .codegen.export import ExportError
+    from .mpc.contractive import ContractiveMPC
+    from .mpc.sequence import SetSequenceMPC
+
+    try:
+        ex = models.load(args.example)
+    except (KeyError, ValueError) as exc:
+        print(f"cmpc export: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not args.overwrite)):
+        print(f"cmpc export: {out} exists and is not an empty directory (use --overwrite)",
+              file=sys.stderr)
+        return 2
+    try:
+        ctrl, seq = _controller(ex, args.controller, args.cache,
+                                False if args.no_progress else None)
+    except ValueError as exc:
+        print(f"cmpc export: {exc}", file=sys.stderr)
+        return 2
+    if isinstance(ctrl, SetSequenceMPC):
+        cfg = ex.info["sequence"]
+        ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
+                              local_law=ex.local_law, solver="sqp", robust=cfg["robust"])
+    else:
+        kw = dict(ex.info["mpc"])
+        if kw.get("solver") == "lp":
+            print(f"cmpc export: example '{ex.name}' uses the LP form of the contractive MPC "
+                  "(solver='lp'), which has no C export; the sqp and ipopt forms have one",
+                  file=sys.stderr)
+            return 2
+        kw["solver"] = "sqp"
+        if kw.get("horizon") is None:
+            kw["horizon"] = kw.get("horizon_max", 10)
+        ctrl = ContractiveMPC(ex.model, **kw)
+    x0s = np.asarray(ex.info.get("run", {}).get("x0s", ex.x0s), dtype=float)
+    x0 = x0s.reshape(-1, ex.model.n)[0] if x0s.size else None
+    try:
+        info = export_c(ctrl, out, solver=args.solver, overwrite=args.overwrite, x0=x0)
+    except (ExportError, ValueError, TypeError) as exc:
+        print(f"cmpc export: {exc}", file=sys.stderr)
+        return 2
+    print(f"exported {ex.name} ({info.kind}, solver {info.solver}) to {out}: "
+          f"{', '.join(info.files)}")
+    if info.tables:
+        print("tables: " + ", ".join(f"{k} {v}" for k, v in info.tables.items()))
+    if args.build:
+        try:
+            build(out)
+        except ExportError as exc:
+            print(f"cmpc export: {exc}", file=sys.stderr)
+            return 1
+        res = subprocess.run([str(out / "example")], capture_output=True, text=True)
+        print(res.stdout, end="")
+        if res.returncode != 0:
+            print(f"cmpc export: the example program exited with {res.returncode}",
+                  file=sys.stderr)
+            return 1
+    else:
+        print(f"build with: make -C {out} && {out / 'example'}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``cmpc`` console script."""
     parser = argparse.ArgumentParser(prog="cmpc", description=__doc__.split("\n\n")[1])
@@ -350,8 +418,23 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--cache", default=None,
                        help="directory of cached set sequences (default: "
                             "$XDG_CACHE_HOME/casadi_cmpc or ~/.cache/casadi_cmpc)")
+    p_exp = sub.add_parser("export", help="export the controller of an example to C")
+    p_exp.add_argument("example", help="example name; see 'cmpc list'")
+    p_exp.add_argument("--out", required=True, help="directory of the C sources (created)")
+    p_exp.add_argument("--solver", choices=("sqp", "ipopt"), default="sqp",
+                       help="'sqp' (default): standalone C; 'ipopt': links casadi's IPOPT")
+    p_exp.add_argument("--controller", choices=("auto", "sequence", "contractive"),
+                       default="auto", help="as for 'cmpc run'")
+    p_exp.add_argument("--overwrite", action="store_true",
+                       help="replace the contents of a non-empty --out directory")
+    p_exp.add_argument("--build", action="store_true",
+                       help="run make afterwards and the example program (needs gcc)")
+    p_exp.add_argument("--cache", default=None, help="as for 'cmpc run'")
+    p_exp.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("list", help="list the example names")
     args = parser.parse_args(argv)
+    if args.command == "export":
+        return _export(args)
     if args.command == "list":
         from . import models
 

@@ -126,3 +126,36 @@ def test_unwritable_out_is_refused_before_running(tmp_path, capsys):
     assert main(["run", "grimm", "--out", str(blocker / "sub"), "--no-progress"]) == 2
     captured = capsys.readouterr()
     assert "cannot write" in captured.err and "run 1" not in captured.out
+
+
+@pytest.mark.parametrize("name", cm.models.names())
+def test_export_every_listed_example(name, tmp_path, capsys, cache):
+    """``cmpc export`` writes the C sources of every example's controller (the sequence
+    examples from the cached sets); the header names the example's dimensions."""
+    out = tmp_path / "c"
+    code = main(["export", name, "--out", str(out), "--cache", cache, "--no-progress"])
+    text = capsys.readouterr()
+    ex = cm.models.load(name)
+    if ex.info["mpc"].get("solver") == "lp" and name not in SEQUENCE_EXAMPLES:
+        # the LP form has no C export: a clear refusal, nothing written
+        assert code == 2 and "solver='lp'" in text.err and not out.exists()
+        return
+    assert code == 0, text.err
+    hdr = (out / "cmpc_controller.h").read_text()
+    assert f"#define CMPC_NX {ex.model.n}" in hdr and f"#define CMPC_NU {ex.model.m}" in hdr
+    kind = "set_sequence" if name in SEQUENCE_EXAMPLES else "contractive"
+    assert f'#define CMPC_KIND "{kind}"' in hdr
+    assert "int cmpc_step(const double *x, double *u);" in hdr
+
+
+@pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="needs gcc")
+def test_export_build_runs_the_example_program(tmp_path, capsys, cache):
+    out = tmp_path / "c"
+    assert main(["export", "cstr", "--out", str(out), "--cache", cache, "--build",
+                 "--no-progress"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = [ln.split() for ln in lines if ln[:1].isdigit()]
+    assert len(rows) == 30 and int(rows[0][1]) > 0 and int(rows[-1][1]) == 0
+    # a non-empty directory is refused without --overwrite
+    assert main(["export", "cstr", "--out", str(out), "--cache", cache]) == 2
+    assert "--overwrite" in capsys.readouterr().err

@@ -128,14 +128,21 @@ class SetSequence:
 
     # ------------------------------------------------------------------ queries
     def _index(self) -> Any:
+        """The grid of :meth:`_grid` when the sets are the step boxes (with T), else None
+        (polytopic steps: the level is read from the polytopes)."""
+        if any(st.get("polytope") is not None for st in self.steps):
+            return None
+        return self._grid()
+
+    def _grid(self) -> Any:
         """Per cell of the grid of all step boxes' bounds: the smallest step whose boxes
-        cover the cell, and one such box (built once; None without boxes)."""
+        cover the cell, and one such box (built once; None without boxes):
+        ``(edges, level, box)``."""
         idx = getattr(self, "_idx", None)
         if idx is not None:
             return idx if idx else None
         boxes = [st.get("boxes") for st in self.steps]
-        if not boxes or any(b is None for b in boxes) or any(
-                st.get("polytope") is not None for st in self.steps):
+        if not boxes or any(b is None for b in boxes):
             self._idx = False
             return None
         allb = np.concatenate(boxes)
@@ -236,7 +243,8 @@ class SetSequence:
         """``(i, u)``: a stored proving control of a box first proven at step i that holds
         ``x`` (smallest i), or None (x in T or in no box, or no controls stored)."""
         p = np.asarray(x, dtype=float).reshape(-1)
-        if self._index() is not None:
+        if self._grid() is not None and all(st.get("witness") is not None
+                                            for st in self.steps):
             lv, bx = self._box_levels(p[None])
             if lv[0] < 1:
                 return None

@@ -1201,6 +1201,14 @@ class ContractiveMPC:
                          elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
                          x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
 
+    def export_c(self, directory: Any, solver: str = "sqp", **kw: Any) -> Any:
+        """Write this controller as standalone C (fixed horizon, receding mode); see
+        :func:`casadi_cmpc.codegen.export_c` for the files, the ``cmpc_step`` API and the
+        options. Returns an :class:`~casadi_cmpc.codegen.ExportInfo`."""
+        from ..codegen import export_c
+
+        return export_c(self, directory, solver=solver, **kw)
+
     def __repr__(self) -> str:
         hz = self.horizon if self.horizon is not None else \
             f"search {self.horizon_min}..{self.horizon_max}"

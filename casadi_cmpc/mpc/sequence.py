@@ -4,32 +4,87 @@ In ``K_i \\ K_{i-1}`` the controller solves the one-step problem (4.26)-(4.27)
 
     min_u max_{w in W}  f(x,u,w)' Q f(x,u,w) + u' R u   s.t.  f(x, u, w) in K_{i-1} for all w,
 
-and applies the local law inside the terminal set ``K_0 = T``. Every applied control is
-certified by interval arithmetic: ``f(x, u, W) ⊆ K_{i-1}``; when the solver's control cannot
-be certified, the proving control stored with the sequence is applied instead.
+and applies the local law inside the terminal set ``K_0 = T``. The worst case over w is
+taken at the vertices of W (exact for models affine in w) or, for models not affine in w, by
+the interval minimax of Alg 5.3 (:func:`casadi_cmpc.minimax`). Every applied control is
+certified by interval arithmetic: ``f(x, u, W) ⊆ K_{i-1}``; when the optimiser's control
+cannot be certified, the proving control stored with the sequence is applied instead.
 """
 
 from __future__ import annotations
 
+import math
 import time
+import warnings
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from .._validate import float_vector, weight_matrix
-from ..exceptions import DimensionError, ModelError
+from ..exceptions import CmpcWarning, DimensionError, ModelError
+from ..interval.modal import SemanticExtension
 from ..model import Model
 from ..sets.polytope import Polytope
 from ..solvers.engine import Status
+from ..solvers.minimax import MinimaxResult
+from ..solvers.minimax import minimax as _minimax
 from ..solvers.result import Certificate
 from .contractive import MPCResult, _solver_options
 
 __all__ = ["SetSequenceMPC"]
 
+_MINIMAX_MODES = ("auto", "vertices", "interval")
+_MINIMAX_KEYS = ("eps", "time_limit", "max_boxes", "w_depth", "w_depth_final", "mean_value")
+
 
 def _members(S: Any) -> list[Any]:
     return list(getattr(S, "members", None) or getattr(S, "polytopes", None) or [S])
+
+
+def _minimax_options(opts: Any, U: Any, l: int) -> dict[str, Any]:
+    """Checked options of the interval minimax with their defaults (see SetSequenceMPC)."""
+    if opts is None:
+        opts = {}
+    if not isinstance(opts, dict):
+        raise TypeError(f"minimax_options must be a dict; got {type(opts).__name__}")
+    unknown = sorted(set(opts) - set(_MINIMAX_KEYS))
+    if unknown:
+        raise ValueError(f"unknown minimax_options {unknown}; valid keys: "
+                         f"{', '.join(_MINIMAX_KEYS)}")
+    width = float(np.max(np.asarray(U.hi, dtype=float) - np.asarray(U.lo, dtype=float)))
+    out: dict[str, Any] = {"eps": width / 32 if width > 0 else 1e-3, "time_limit": 0.03,
+                           "max_boxes": 2000, "w_depth": min(l, 2), "mean_value": True}
+
+    def number(key: str, v: Any, allow_none: bool) -> float | None:
+        if v is None and allow_none:
+            return None
+        if isinstance(v, (bool, np.bool_, str, bytes)) or not isinstance(
+                v, (int, float, np.integer, np.floating)) or not math.isfinite(v) or v <= 0:
+            raise ValueError(f"minimax_options['{key}'] must be a finite positive number"
+                             f"{' or None' if allow_none else ''}; got {v!r}")
+        return float(v)
+
+    for key, v in opts.items():
+        if key in ("eps", "time_limit"):
+            out[key] = number(key, v, key == "time_limit")
+        elif key in ("max_boxes", "w_depth", "w_depth_final"):
+            low = 1 if key == "max_boxes" else 0
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) \
+                    or v < low:
+                raise ValueError(f"minimax_options['{key}'] must be an integer >= {low}; "
+                                 f"got {v!r}")
+            out[key] = int(v)
+        else:  # mean_value
+            if not isinstance(v, (bool, np.bool_)):
+                raise ValueError(f"minimax_options['mean_value'] must be True or False; "
+                                 f"got {v!r}")
+            out[key] = bool(v)
+    out.setdefault("w_depth_final", out["w_depth"] + 1)
+    if out["w_depth_final"] < out["w_depth"]:
+        raise ValueError(f"minimax_options['w_depth_final'] = {out['w_depth_final']} must be "
+                         f">= w_depth = {out['w_depth']}")
+    return out
 
 
 class SetSequenceMPC:
@@ -57,15 +112,63 @@ class SetSequenceMPC:
         The cost penalises ``f - x_ref`` (default 0).
     solver_options : dict, optional
         Passed to ``casadi.nlpsol``.
+    minimax : {"auto", "vertices", "interval"}
+        How the worst case over W of (5.20) is taken. ``"vertices"``: the cost's maximum
+        over the vertices of W through an epigraph variable of the local solver.
+        ``"interval"``: in addition, the certified interval minimax of Alg 5.3
+        (:func:`casadi_cmpc.minimax`) over U and the whole W box, whose control is tried
+        first (see the Notes). ``"auto"`` (default):
+        ``"interval"`` for a robust controller of a model not affine in w
+        (:attr:`Model.is_affine_in_w`), else ``"vertices"``. The choice made is the attribute
+        ``minimax``.
+    minimax_options : dict, optional
+        For ``"interval"``: ``eps`` (u-boxes narrower than this are not bisected; default
+        the widest side of U / 32, in the units of u), ``time_limit`` (s, default 0.03, or
+        None; checked between levels of the search, and the final bounds come after it),
+        ``max_boxes`` (u-boxes classified, default 2000), ``w_depth`` (bisection rounds of W
+        during the search, default ``min(l, 2)``), ``w_depth_final`` (for the final bounds,
+        default ``w_depth + 1``), ``mean_value`` (default True). With the defaults one step
+        takes about 10 ms for one control and one disturbance, and about 60 ms for two
+        controls, two disturbances and a target of 7 rows (against 2-3 ms for
+        ``"vertices"``); a stopped search keeps a certified bracket. Other keys or values
+        are refused.
+
+    Attributes
+    ----------
+    minimax : str
+        ``"vertices"`` or ``"interval"``: the resolved choice of the ``minimax`` argument.
 
     Notes
     -----
-    **Robust minimax (5.20).** The cost's maximum over the vertices of W is taken through an
-    epigraph variable, and for polytopic sets the constraint is imposed at every vertex. For a
-    model affine in w this is exact (a convex set holds the image of W iff it holds the
-    images of its vertices; the cost is convex in the successor). For other models the
-    vertex maximum is a lower estimate of the worst-case cost; feasibility is not affected,
-    since every applied control is certified by intervals over the whole W.
+    **Robust minimax (5.20), vertices.** The cost's maximum over the vertices of W is taken
+    through an epigraph variable, and for polytopic sets the constraint is imposed at every
+    vertex. For a model affine in w this is exact (a convex set holds the image of W iff it
+    holds the images of its vertices; the cost is convex in the successor). For other models
+    the vertex maximum is a lower estimate of the worst-case cost; feasibility is not
+    affected, since every applied control is certified by intervals over the whole W.
+
+    **Robust minimax (5.20), interval (Alg 5.4 step 6 with Alg 5.3).** At ``x`` in
+    ``K_i \\ K_{i-1}``, :func:`casadi_cmpc.minimax` brackets
+    ``V* = min_{u in U} max_{w in W} J(u, w)``, ``J = e' Q e + u' R u``,
+    ``e = f(x, u, w) - x_ref``, with ``x`` held as a thin parameter, under
+    ``H f(x, u, w) <= h`` for all w when ``K_{i-1}`` is held by polytopes (the latest
+    polytope of ``K_{i-1}``, tightened as in the local solver; for a box union only the
+    terminal set ``K_0 = T`` gives rows, and the search is over U without constraint at
+    the other levels). The vertex-epigraph solver runs first and its candidates (next
+    paragraph) seed the search, so the minimax's point is never worse, in its certified
+    bound, than the best of them that meets the rows. Its certified point
+    (``max_w J <= upper`` there) is the first candidate, then those of the next paragraph;
+    the interval test ``f(x, u, W) ⊆ K_{i-1}`` decides as always. When the minimax's point
+    fails it, the blends ``u + t (u_mm - u)`` (t = 3/4, 1/2, 1/4) of the certified control
+    ``u`` toward it are tried, and the first certified one replaces ``u`` when its
+    certified worst-case cost is smaller (a box union cannot be a constraint of the search,
+    so its point may leave the target). ``stats["minimax"]`` holds the
+    search's status, bracket and size, and ``stats["cost_upper"]`` a certified upper bound
+    of ``max_{w in W} J`` at the control applied (its ``upper`` when the control is the
+    minimax's; otherwise from a minimax over the single point ``u``), with
+    ``stats["cost_lower"]`` the certified lower bound of that problem's ``V*`` when the
+    control is the minimax's. ``cost`` of the result stays the maximum over the vertices of W
+    (a lower estimate here).
 
     **Sets held as box unions.** The solver minimises the cost over U; the control applied is
     the first of ``u*``, ``u_w + t (u* - u_w)`` (t = 3/4, 1/2, 1/4) and the stored proving
@@ -74,7 +177,8 @@ class SetSequenceMPC:
 
     def __init__(self, model: Model, seq: Any, Q: Any = None, R: Any = None,
                  local_law: Any = None, solver: str = "ipopt", *, robust: bool | None = None,
-                 x_ref: Any = None, solver_options: dict | None = None) -> None:
+                 x_ref: Any = None, solver_options: dict | None = None,
+                 minimax: str = "auto", minimax_options: dict | None = None) -> None:
         from ..control.controllable import _Target, _w_setup
         from ..control.invariance import _law_expr
 
@@ -113,12 +217,76 @@ class SetSequenceMPC:
         if self._polytopic:
             self._rmax = max(M.A.shape[0] for S in sets for M in _members(S)
                              if isinstance(M, Polytope))
+        self.minimax = self._resolve_minimax(minimax)
+        if self.minimax == "interval":
+            self._mm_opts = _minimax_options(minimax_options, model.U, model.l)
+        else:
+            if minimax_options is not None:
+                _minimax_options(minimax_options, model.U, model.l)  # still checked
+                warnings.warn("minimax_options are not used: the minimax is 'vertices'",
+                              CmpcWarning, stacklevel=2)
+            self._mm_opts = {}
         self._nlp = self._build(solver_options or {})
+        if self.minimax == "interval":
+            self._build_minimax()
         self.contract = np.eye(n)  # the whole state is driven to x_ref (for reports)
         self.last_info: dict[str, Any] = {}
         self._xnext: np.ndarray | None = None
 
+    def _resolve_minimax(self, minimax: Any) -> str:
+        if not isinstance(minimax, str) or minimax.lower() not in _MINIMAX_MODES:
+            raise ValueError(f"minimax must be one of {', '.join(map(repr, _MINIMAX_MODES))}; "
+                             f"got {minimax!r}")
+        mode = minimax.lower()
+        if mode == "auto":
+            return "interval" if self.robust and not self.model.is_affine_in_w else "vertices"
+        if mode == "interval" and self.model.l == 0:
+            raise ValueError(f"minimax='interval' needs a disturbance; model "
+                             f"'{self.model.name}' has none (use 'vertices' or 'auto')")
+        return mode
+
     # ---------------------------------------------------------------- solver
+    def _build_minimax(self) -> None:
+        """Semantic extensions of the cost and of the polytope rows, x as a parameter."""
+        model = self.model
+        n, m, l = model.n, model.m, model.l
+        u, w, x = ca.SX.sym("u", m), ca.SX.sym("w", l), ca.SX.sym("x", n)
+        # rows of the largest polytope that may be a target (T, the polytopes of K_j)
+        r = max(M.A.shape[0] for S in self.seq.sets for M in _members(S)
+                if isinstance(M, Polytope))
+        Hs, hs = ca.SX.sym("H", r, n), ca.SX.sym("h", r)
+        xn = model.function(x, u, w)
+        e = xn - ca.DM(self.x_ref)
+        J = ca.mtimes([e.T, ca.DM(self.Q), e]) + ca.mtimes([u.T, ca.DM(self.R), u])
+        p = ca.vertcat(x, ca.vec(Hs), hs)
+        mv = self._mm_opts["mean_value"]
+        # one cost for the unconstrained search (parameter x) and one with the rows' inputs
+        # (the parameters of the cost and of the constraints of one search are shared)
+        self._mm_cost = SemanticExtension(ca.Function("one_step_cost", [u, w, x], [J]),
+                                          mean_value=mv)
+        self._mm_cost_p = SemanticExtension(ca.Function("one_step_cost_p", [u, w, p], [J]),
+                                            mean_value=mv)
+        self._mm_rows = SemanticExtension(
+            ca.Function("one_step_rows", [u, w, p], [ca.mtimes(Hs, xn) - hs]), mean_value=mv)
+        self._mm_r = r
+
+    def _rows(self, j: int, r: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(H, h)`` padded to r rows: the latest polytope of ``K_j`` (P_j, or T) when K_j
+        is held by polytopes only, its offsets tightened by 1e-6 of each row's scale so that
+        a control on a facet passes the interval check (the tightening claims nothing); None
+        for a box union."""
+        members = _members(self.seq.sets[j])
+        if not all(isinstance(M, Polytope) for M in members):
+            return None
+        P = members[-1]
+        n = self.model.n
+        H = np.zeros((r, n))
+        h = np.ones(r)
+        H[: P.A.shape[0]] = P.A
+        scale = np.abs(P.A) @ np.maximum(np.abs(self.model.X.lo), np.abs(self.model.X.hi))
+        h[: P.b.shape[0]] = P.b - 1e-6 * np.maximum(scale, np.abs(P.b))
+        return H, h
+
     def _build(self, opts: dict) -> Any:
         model = self.model
         n, m = model.n, model.m
@@ -156,6 +324,7 @@ class SetSequenceMPC:
             ca.DM.zeros(0)
         self._costfun = ca.Function("cost", [x, u], [ca.mmax(ca.vertcat(*costs)),
                                                       f(x, u, wn)])
+        self._nlp_spec = (nlp, plugin, base)  # kept for the C export
         return ca.nlpsol("set_sequence_mpc", plugin, nlp, base)
 
     def _target(self, i: int) -> Any:
@@ -184,7 +353,7 @@ class SetSequenceMPC:
 
     def __repr__(self) -> str:
         return (f"SetSequenceMPC(model='{self.model.name}', sets={len(self.seq)}, "
-                f"solver='{self.solver}', robust={self.robust})")
+                f"solver='{self.solver}', robust={self.robust}, minimax='{self.minimax}')")
 
     def reset(self) -> None:
         """Forget the previous call (the controller keeps no state between calls)."""
@@ -233,29 +402,38 @@ class SetSequenceMPC:
             return self._done(x, u, self._cost(x, u), 0, cert, stats, "local_law",
                               Status.PROVED, t0)
         # ---------------- one-step problem into K_{lvl - 1}
+        j = lvl - 1
+        u_w = None if wit is None else np.asarray(wit[1], dtype=float).reshape(m)
         ts = time.perf_counter()
-        u0 = wit[1] if wit is not None else None
-        u_opt = self._solve_nlp(x, lvl - 1, stats, u0)
+        u_opt = self._solve_nlp(x, j, stats, u_w)
         stats["solve_time"] = time.perf_counter() - ts
-        u_w = None if wit is None else wit[1]
-        cands = []
+        cands: list[tuple[np.ndarray, str]] = []
         if u_opt is not None:
-            cands.append(u_opt)
+            cands.append((u_opt, "solver"))
         if u_w is not None:
             if u_opt is not None:
-                cands += [u_w + tt * (u_opt - u_w) for tt in (0.75, 0.5, 0.25)]
-            cands.append(u_w)
+                cands += [(u_w + tt * (u_opt - u_w), "blend of solver and stored control")
+                          for tt in (0.75, 0.5, 0.25)]
+            cands.append((u_w, "stored control"))
+        mm: MinimaxResult | None = None
+        if self.minimax == "interval":
+            tm = time.perf_counter()
+            seeds = np.asarray([c for c, _ in cands], dtype=float).reshape(-1, m)
+            mm = self._solve_minimax(x, j, stats, seeds)
+            stats["minimax_time"] = time.perf_counter() - tm
+            if mm.u_feasible and mm.u is not None:
+                cands.insert(0, (np.asarray(mm.u, dtype=float).reshape(m), "interval minimax"))
         if not cands:
-            cert = Certificate("undecided", None, f"f(x, u, W) in K_{lvl - 1}",
+            cert = Certificate("undecided", None, f"f(x, u, W) in K_{j}",
                                "the solver failed and no proving control is stored")
             return self._done(x, nan_u, np.nan, lvl, cert, stats, "mpc", Status.NUMERICAL,
                               t0)
-        C = np.asarray(cands, dtype=float).reshape(-1, m)
+        C = np.asarray([c for c, _ in cands], dtype=float).reshape(-1, m)
         tv = time.perf_counter()
         ok = np.zeros(C.shape[0], dtype=bool)
-        ok[0] = self._certify(x, C[:1], lvl - 1)[0]  # the solver's control first
+        ok[0] = self._certify(x, C[:1], j)[0]  # the optimiser's control first
         if not ok[0] and C.shape[0] > 1:
-            ok[1:] = self._certify(x, C[1:], lvl - 1)
+            ok[1:] = self._certify(x, C[1:], j)
         # the witness proves x's box into the target of its own step (a subset of K_{lvl-1})
         if u_w is not None and not ok[-1] and wit[0] <= lvl:
             ok[-1] = self._certify(x, C[-1:], wit[0] - 1)[0]
@@ -263,33 +441,88 @@ class SetSequenceMPC:
         k = np.flatnonzero(ok)
         if k.size == 0:
             u = C[-1] if u_w is not None else C[0]
-            cert = Certificate("unverified", None, f"f(x, u, W) in K_{lvl - 1}",
+            self._cost_bounds(x, u, mm, False, stats)
+            cert = Certificate("unverified", None, f"f(x, u, W) in K_{j}",
                                "no candidate control could be certified")
             return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc",
                               Status.UNDECIDED, t0)
-        u = C[k[0]]
-        src = "solver" if (u_opt is not None and k[0] == 0) else (
-            "stored control" if k[0] == C.shape[0] - 1 and u_w is not None else
-            "blend of solver and stored control")
-        cert = Certificate("verified", True, f"f(x, u, w) in K_{lvl - 1} for all w in W",
+        u, src = C[k[0]], cands[k[0]][1]
+        if mm is not None and mm.u_feasible and src != "interval minimax":
+            u, src = self._toward_minimax(x, j, u, src, np.asarray(mm.u, dtype=float), stats)
+        self._cost_bounds(x, u, mm, src == "interval minimax", stats)
+        cert = Certificate("verified", True, f"f(x, u, w) in K_{j} for all w in W",
                            f"interval evaluation at x with u from the {src}",
-                           {"candidates": int(C.shape[0]), "chosen": int(k[0])})
+                           {"candidates": int(C.shape[0]), "chosen": int(k[0]),
+                            "source": src})
         return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc", Status.PROVED, t0)
+
+    # ---------------------------------------------------------------- interval minimax
+    def _minimax_kw(self) -> dict[str, Any]:
+        o = self._mm_opts
+        return {"options": {"w_depth": o["w_depth"], "w_depth_final": o["w_depth_final"]},
+                "max_boxes": o["max_boxes"], "time_limit": o["time_limit"],
+                "progress": False}
+
+    def _solve_minimax(self, x: np.ndarray, j: int, stats: dict,
+                       seeds: np.ndarray) -> MinimaxResult:
+        """Alg 5.3 at ``x``: min over U of max over W of the cost, into ``K_j``'s rows;
+        ``seeds`` (k, m): the other candidates, tried first (their bound prunes the search)."""
+        rows = self._rows(j, self._mm_r)
+        if rows is None:
+            f, g, par = self._mm_cost, None, x
+        else:
+            H, h = rows
+            f, g = self._mm_cost_p, self._mm_rows
+            par = np.concatenate([x, H.ravel(order="F"), h])
+        res = _minimax(f, self.model.U, self._Wbox, self._mm_opts["eps"], g, params=par,
+                       points=seeds if seeds.size else None, **self._minimax_kw())
+        stats["minimax"] = {
+            "status": res.status.name, "lower": res.lower, "upper": res.upper,
+            "u": None if res.u is None else np.asarray(res.u, dtype=float).copy(),
+            "u_feasible": res.u_feasible, "constrained": rows is not None,
+            "n_boxes": res.n_boxes, "levels": res.nit, "elapsed": res.elapsed,
+            "message": res.message}
+        return res
+
+    def _point_bound(self, x: np.ndarray, u: np.ndarray) -> float:
+        """A certified upper bound of ``max_{w in W} J(u, w)`` at the single point u."""
+        ub = np.stack([u, u], axis=-1)
+        r = _minimax(self._mm_cost, ub, self._Wbox, self._mm_opts["eps"], params=x,
+                     **{**self._minimax_kw(), "max_boxes": 4})
+        return float(r.upper)
+
+    def _toward_minimax(self, x: np.ndarray, j: int, u: np.ndarray, src: str,
+                        u_mm: np.ndarray, stats: dict) -> tuple[np.ndarray, str]:
+        """The certified control ``u`` or, when one is certified too and has a smaller
+        certified worst-case cost, the blend ``u + t (u_mm - u)`` with the largest t of
+        3/4, 1/2, 1/4 (the minimax's own point could not be certified)."""
+        B = np.asarray([u + t * (u_mm - u) for t in (0.75, 0.5, 0.25)])
+        ok = self._certify(x, B, j)
+        bound = self._point_bound(x, u)
+        stats["cost_upper"] = bound
+        if ok.any():
+            ub = B[int(np.flatnonzero(ok)[0])]
+            b2 = self._point_bound(x, ub)
+            if b2 < bound:
+                stats["cost_upper"] = b2
+                return ub, f"blend of interval minimax and {src}"
+        return u, src
+
+    def _cost_bounds(self, x: np.ndarray, u: np.ndarray, mm: MinimaxResult | None,
+                     from_minimax: bool, stats: dict) -> None:
+        """``stats["cost_upper"]`` (and ``"cost_lower"``) for the interval minimax."""
+        if mm is None or not np.isfinite(u).all():
+            return
+        if from_minimax:
+            stats["cost_lower"], stats["cost_upper"] = mm.lower, mm.upper
+        elif "cost_upper" not in stats:
+            stats["cost_upper"] = self._point_bound(x, u)
 
     def _solve_nlp(self, x: np.ndarray, j: int, stats: dict,
                    u0: np.ndarray | None) -> np.ndarray | None:
         m, n, r = self.model.m, self.model.n, self._rmax
-        H = np.zeros((r, n))
-        h = np.ones(r)
-        if r:
-            S = self.seq.sets[j]
-            polys = [M for M in _members(S) if isinstance(M, Polytope)]
-            P = polys[-1]  # the latest polytope of K_j (P_j, or T)
-            H[: P.A.shape[0]] = P.A
-            # tightened by 1e-6 of each row's scale, so that the optimum (on a facet) passes
-            # the interval check; the tightening claims nothing
-            scale = np.abs(P.A) @ np.maximum(np.abs(self.model.X.lo), np.abs(self.model.X.hi))
-            h[: P.b.shape[0]] = P.b - 1e-6 * np.maximum(scale, np.abs(P.b))
+        rows = self._rows(j, r) if r else None
+        H, h = rows if rows is not None else (np.zeros((r, n)), np.ones(r))
         p = np.concatenate([x, H.ravel(order="F"), h])
         lbx = np.concatenate([self.model.U.lo, [-np.inf]])
         ubx = np.concatenate([self.model.U.hi, [np.inf]])
@@ -321,7 +554,7 @@ class SetSequenceMPC:
         self._xnext = None
         self.last_info = {"status": "ok" if status == Status.PROVED else status.name.lower(),
                           "certificate": cert.label, "horizon": lvl, "mode": mode,
-                          "solve_time": el}
+                          "solve_time": el, "minimax": self.minimax}
         return MPCResult(status=status, message=cert.reason, method="set sequence one-step",
                          nit=0, n_boxes=0, elapsed=el, x=x, u=u, u_seq=u[None],
                          x_pred=xp, cost=float(cost), horizon=lvl, certificate=cert,

@@ -18,7 +18,6 @@ import warnings
 from dataclasses import dataclass
 from typing import Any
 
-import casadi as ca
 import numpy as np
 
 from ..exceptions import CmpcWarning, DimensionError
@@ -87,29 +86,55 @@ class MinimaxResult(_BracketResult):
         return [f"u={_format_point(self.u)}"]
 
 
-def _check_fun(fun: Any, name: str, m: int, l: int, scalar: bool) -> ca.Function:
-    fun = one_output_function(fun, name, ("u", "w"))
-    if fun.numel_in(0) != m or fun.numel_in(1) != l:
+def _check_fun(fun: Any, name: str, m: int, l: int, k: int | None, scalar: bool,
+               mean_value: bool | None) -> SemanticExtension:
+    """The semantic extension of ``fun`` (a Function of (u, w) or, with ``k`` parameters,
+    of (u, w, p)), after checking its inputs and outputs; a SemanticExtension is reused."""
+    inputs = ("u", "w") if k is None else ("u", "w", "p")
+    raw = fun.fun if isinstance(fun, SemanticExtension) else split_inclusion(fun, name)[0]
+    if k is None and getattr(raw, "n_in", lambda: 0)() == 3:
+        raise DimensionError(f"{name} takes three inputs (u, w, p): give params, the values "
+                             "of p")
+    if isinstance(fun, SemanticExtension):
+        ext = fun
+        if mean_value is not None and bool(mean_value) != ext.mean_value:
+            raise ValueError(
+                f"{name} is a SemanticExtension built with mean_value={ext.mean_value}; the "
+                f"option mean_value={bool(mean_value)} cannot change it (build the extension "
+                "with the value wanted, or drop the option)")
+        fn = one_output_function(raw, name, inputs)
+    else:
+        fn = one_output_function(raw, name, inputs)
+        ext = None
+    if fn.numel_in(0) != m or fn.numel_in(1) != l:
         raise DimensionError(
-            f"{name} takes inputs of {fun.numel_in(0)} and {fun.numel_in(1)} elements but U "
+            f"{name} takes inputs of {fn.numel_in(0)} and {fn.numel_in(1)} elements but U "
             f"has dimension {m} and W dimension {l}")
-    if scalar and fun.numel_out(0) != 1:
-        raise DimensionError(f"{name} must be scalar; '{fun.name()}' has "
-                             f"{fun.numel_out(0)} outputs")
-    return fun
+    if k is not None and fn.numel_in(2) != k:
+        raise DimensionError(f"{name} takes a parameter input of {fn.numel_in(2)} elements "
+                             f"but params has {k}")
+    if scalar and fn.numel_out(0) != 1:
+        raise DimensionError(f"{name} must be scalar; '{fn.name()}' has "
+                             f"{fn.numel_out(0)} outputs")
+    if ext is None:
+        ext = SemanticExtension(fn, mean_value=True if mean_value is None else
+                                bool(mean_value))
+    return ext
 
 
 class _Minimax:
     """State of one minimax search: the extensions, the W partitions, the certified bound."""
 
-    def __init__(self, f: ca.Function, g: ca.Function | None, U: np.ndarray, W: np.ndarray,
-                 w_depth: int, w_depth_final: int, mean_value: bool) -> None:
-        self.fext = SemanticExtension(f, mean_value=mean_value)
-        self.gext = None if g is None else SemanticExtension(g, mean_value=mean_value)
+    def __init__(self, fext: SemanticExtension, gext: SemanticExtension | None,
+                 U: np.ndarray, W: np.ndarray, params: np.ndarray | None, w_depth: int,
+                 w_depth_final: int) -> None:
+        self.fext, self.gext = fext, gext
         self.U, self.W = U, W
         self.m, self.l = U.shape[0], W.shape[0]
-        self.imp_w = np.zeros(self.m + self.l, dtype=bool)
-        self.imp_w[self.m:] = True
+        # parameters: thin proper components appended to every joint box
+        self.P = np.zeros((0, 2)) if params is None else thin(params)
+        self.imp_w = np.zeros(self.m + self.l + self.P.shape[0], dtype=bool)
+        self.imp_w[self.m:self.m + self.l] = True
         self.cells = self._cells(w_depth)
         self.cells_final = self._cells(w_depth_final)
         pts = [np.clip(0.5 * W[:, 0] + 0.5 * W[:, 1], W[:, 0], W[:, 1])]
@@ -125,11 +150,12 @@ class _Minimax:
         return _partition(self.W[None], allowed, depth)[0]  # (K, l, 2)
 
     def _pairs(self, ub: np.ndarray, cells: np.ndarray) -> np.ndarray:
-        """Joint boxes (u-box, w-cell) for every u-box and cell: (N*K, m+l, 2)."""
+        """Joint boxes (u-box, w-cell, params) for every u-box and cell: (N*K, m+l+k, 2)."""
         N, K = ub.shape[0], cells.shape[0]
         uu = np.repeat(ub, K, axis=0)
         ww = np.tile(cells, (N, 1, 1))
-        return np.concatenate([uu, ww], axis=1)
+        pp = np.broadcast_to(self.P, (N * K,) + self.P.shape)
+        return np.concatenate([uu, ww, pp], axis=1)
 
     def lower_bounds(self, ub: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lb of min_{u ∈ box} max_w f, proven infeasible) for u-boxes (N, m, 2)."""
@@ -190,15 +216,15 @@ class _Minimax:
         k = min(k, 65)
         axes = [np.linspace(lo, hi, k) for lo, hi in self.W]
         grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(self.l, -1).T
-        Z = np.concatenate([np.repeat(thin(u[None]), grid.shape[0], axis=0), thin(grid)],
-                           axis=1)
+        Z = self._pairs(thin(u[None]), thin(grid))
         vals = self.fext.evaluate_unchecked(Z)[:, 0]
         mid = 0.5 * vals[:, 0] + 0.5 * vals[:, 1]
         return grid[int(np.argmax(np.where(np.isfinite(mid), mid, -np.inf)))]
 
 
 def minimax(f: Any, U: Any, W: Any, eps: float,
-            constraints: Any = None, *, method: str = "auto",
+            constraints: Any = None, *, params: Any = None, points: Any = None,
+            method: str = "auto",
             options: dict[str, Any] | None = None, max_boxes: int = 1_000_000,
             time_limit: float | None = None, progress: bool | None = None) -> MinimaxResult:
     """Certified constrained minimax: ``min_u max_w f(u, w)`` s.t. ``g(u, w) <= 0`` for all w.
@@ -207,25 +233,39 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
 
     Parameters
     ----------
-    f : casadi.Function or InclusionFunction
-        Continuous scalar SX Function of ``(u, w)`` (of an InclusionFunction: its Function,
-        from which the semantic extension is built; its natural form is shared through the
-        cache of :func:`casadi_cmpc.interval.inclusion`).
+    f : casadi.Function, InclusionFunction or SemanticExtension
+        Continuous scalar SX Function of ``(u, w)``, or of ``(u, w, p)`` with ``params``
+        (of an InclusionFunction: its Function, from which the semantic extension is built;
+        its natural form is shared through the cache of
+        :func:`casadi_cmpc.interval.inclusion`). A
+        :class:`~casadi_cmpc.interval.modal.SemanticExtension` of such a Function is used as
+        it is: a caller that solves many problems with the same ``f`` and other ``params``
+        builds it once (about 1 ms saved per call).
     U : Box or array_like, shape (m, 2)
         Decision box (bounded).
     W : Box or array_like, shape (l, 2)
         Disturbance box (bounded).
     eps : float
         u-boxes whose widest component is at most ``eps`` are not bisected (candidates).
-    constraints : casadi.Function or InclusionFunction, optional
-        Continuous SX Function of ``(u, w)`` with a vector output ``g``; ``u`` is feasible when
-        ``g(u, w) <= 0`` for **every** ``w ∈ W``.
+    constraints : casadi.Function, InclusionFunction or SemanticExtension, optional
+        Continuous SX Function of ``(u, w)`` (``(u, w, p)`` with ``params``) with a vector
+        output ``g``; ``u`` is feasible when ``g(u, w) <= 0`` for **every** ``w ∈ W``.
+    params : array_like, shape (k,), optional
+        Values of the third input ``p`` of ``f`` and ``constraints``, held fixed (thin
+        intervals: exact, nothing is folded into constants). Without it, ``f`` and
+        ``constraints`` take ``(u, w)`` only.
+    points : array_like, shape (k, m), optional
+        Guesses of a minimiser (e.g. from a local solver), clipped to U and tried first:
+        the best one proven feasible gives the first ``upper``, which prunes the search from
+        its start. The returned ``upper`` is never above the bound certified at the best of
+        them (when one is proven feasible).
     method : {"auto", "alg5.3"}
         Only ``"alg5.3"`` (the branch and bound of the Notes).
     options : dict, optional
         ``w_depth`` (int, default ``min(3 l, 9)``): rounds of bisection of W into the cells
         used during the search; ``w_depth_final`` (int, default ``w_depth + 3``): finer cells
-        for the final bounds; ``mean_value`` (bool, default True). Unknown keys warn.
+        for the final bounds; ``mean_value`` (bool, default True; a SemanticExtension keeps
+        its own, and a different value is refused). Unknown keys warn.
     max_boxes, time_limit : optional
         Limits; a stopped search keeps its bracket certified.
     progress : bool or None
@@ -286,10 +326,13 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
     ub0 = single_box(U, "U")
     wb0 = single_box(W, "W")
     m, l = ub0.shape[0], wb0.shape[0]
-    f = _check_fun(split_inclusion(f, "f")[0], "f", m, l, scalar=True)
-    g = None if constraints is None else _check_fun(
-        split_inclusion(constraints, "constraints")[0], "constraints", m, l, False)
-    opts: dict[str, Any] = {"w_depth": min(3 * l, 9), "mean_value": True}
+    pv = None
+    if params is not None:
+        pv = np.asarray(params, dtype=float).reshape(-1)
+        if not np.isfinite(pv).all():
+            raise ValueError(f"params must be finite; got {pv.tolist()}")
+    npar = None if pv is None else pv.size
+    opts: dict[str, Any] = {"w_depth": min(3 * l, 9)}
     options = {} if options is None else options
     if not isinstance(options, dict):
         raise TypeError(f"options must be a dict; got {type(options).__name__}")
@@ -298,6 +341,10 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
         warnings.warn(f"minimax ignores the unknown options {unknown}; valid options: "
                       f"{', '.join(_OPTION_KEYS)}", CmpcWarning, stacklevel=2)
     opts.update({k: v for k, v in options.items() if k in _OPTION_KEYS})
+    mv = opts.get("mean_value")
+    fext = _check_fun(f, "f", m, l, npar, True, mv)
+    gext = None if constraints is None else _check_fun(constraints, "constraints", m, l,
+                                                       npar, False, mv)
     opts.setdefault("w_depth_final", int(opts["w_depth"]) + 3)
     w_depth, w_final = int(opts["w_depth"]), int(opts["w_depth_final"])
     if w_depth < 0 or w_final < 0:
@@ -305,7 +352,17 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
                          f"{w_final}")
     eps = positive_eps(eps)
 
-    S = _Minimax(f, g, ub0, wb0, w_depth, w_final, bool(opts["mean_value"]))
+    S = _Minimax(fext, gext, ub0, wb0, pv, w_depth, w_final)
+    if points is not None:
+        P0 = np.asarray(points, dtype=float)
+        if P0.ndim == 1 and P0.size == m:
+            P0 = P0[None]
+        if P0.ndim != 2 or P0.shape[1] != m:
+            raise DimensionError(f"points must have shape (k, {m}); got {np.shape(points)}")
+        if not np.isfinite(P0).all():
+            raise ValueError("points must be finite")
+        with np.errstate(all="ignore"):
+            S.certify(P0, S.cells)
     fr = BoxFrontier.from_boxes(ub0[None])
     out = branch_and_bound(fr, S.classify, eps, max_boxes=max_boxes, time_limit=time_limit,
                            keep_outer=False, progress=progress, desc="minimax")
@@ -332,7 +389,7 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
         status = Status.DISPROVED
         lower = upper = np.inf
         msg = ("proven infeasible: for every u in U some w in W gives g(u, w) > 0"
-               if g is not None else "no finite bound could be certified")
+               if gext is not None else "no finite bound could be certified")
     elif upper == np.inf:
         if status == Status.PROVED:
             status = Status.UNDECIDED
@@ -343,7 +400,7 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
             status = Status.NUMERICAL
         msg = "f is unbounded below on a candidate box (or undefined there): lower = -inf"
     else:
-        over = " over the u with g(u, w) <= 0 for all w" if g is not None else ""
+        over = " over the u with g(u, w) <= 0 for all w" if gext is not None else ""
         msg = (f"certified: {lower:.10g} <= min_u max_w f(u, w) <= {upper:.10g}{over}; the "
                f"returned u is proven feasible and max_w f(u, w) <= {upper:.10g} at it")
         if status == Status.BUDGET:

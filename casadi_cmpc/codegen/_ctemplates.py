@@ -1,0 +1,631 @@
+"""C text of the exported controllers (header, logic, example, Makefile)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+_COMMON = r"""
+#define NX CMPC_NX
+#define NU CMPC_NU
+#define NW CMPC_NW
+
+/* work arrays of the generated functions (C99 has no empty arrays: +1) */
+#define WORK(fn) \
+    static const casadi_real *fn##_arg[fn##_SZ_ARG + 1]; \
+    static casadi_real *fn##_res[fn##_SZ_RES + 1]; \
+    static casadi_int fn##_iw[fn##_SZ_IW + 1]; \
+    static casadi_real fn##_w[fn##_SZ_W + 1];
+
+WORK(cmpc_f)
+static const double cmpc_no_w[1] = {0.0};
+
+void cmpc_model(const double *x, const double *u, const double *w, double *x_next) {
+    cmpc_f_arg[0] = x;
+    cmpc_f_arg[1] = u;
+    cmpc_f_arg[2] = NW > 0 ? w : cmpc_no_w;
+    cmpc_f_res[0] = x_next;
+    cmpc_f(cmpc_f_arg, cmpc_f_res, cmpc_f_iw, cmpc_f_w, 0);
+}
+
+static int all_finite(const double *v, int k) {
+    int i;
+    for (i = 0; i < k; ++i)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static int solver_mem = -1;
+
+#ifdef CMPC_PROFILE
+/* build with -DCMPC_PROFILE -D_POSIX_C_SOURCE=199309L: time spent in the solver alone */
+#include <time.h>
+double cmpc_profile_solver_seconds = 0.0;
+long cmpc_profile_solver_calls = 0;
+static double profile_t0;
+static double profile_now(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+#define PROFILE_BEGIN() (profile_t0 = profile_now())
+#define PROFILE_END() (cmpc_profile_solver_seconds += profile_now() - profile_t0, \
+                       cmpc_profile_solver_calls++)
+#else
+#define PROFILE_BEGIN() ((void)0)
+#define PROFILE_END() ((void)0)
+#endif
+
+static int solver_ready(void) {
+    if (solver_mem < 0) {
+        cmpc_solver_incref();
+        solver_mem = cmpc_solver_checkout();
+    }
+    return solver_mem >= 0;
+}
+"""
+
+_SEQUENCE = r"""
+#define NZ (NU + 1)
+#define NP (NX + CMPC_R * NX + CMPC_R)
+#define NG (CMPC_NV * (1 + CMPC_R))
+
+WORK(cmpc_law)
+WORK(cmpc_cost)
+WORK(cmpc_solver)
+
+/* ---------------------------------------------------------------- level look-up */
+/* Index of the last edge <= v (-1 if none): numpy's searchsorted(e, v, "right") - 1. */
+static int last_le(const double *e, int E, double v) {
+    int lo = 0, hi = E;
+    while (lo < hi) {
+        int mid = lo + (hi - lo) / 2;
+        if (e[mid] <= v) lo = mid + 1; else hi = mid;
+    }
+    return lo - 1;
+}
+
+/* Index of the last edge < v (-1 if none). */
+static int last_lt(const double *e, int E, double v) {
+    int lo = 0, hi = E;
+    while (lo < hi) {
+        int mid = lo + (hi - lo) / 2;
+        if (e[mid] < v) lo = mid + 1; else hi = mid;
+    }
+    return lo - 1;
+}
+
+static int clampi(int i, int a, int b) { return i < a ? a : (i > b ? b : i); }
+
+/* Smallest step whose boxes hold x (-1: none) and the witness row of that box. The grid
+ * has one cell per product of consecutive box bounds; a point on a cell face takes the
+ * smallest level of the (up to 2^n) cells meeting there. O(n log E + 2^n). */
+static int grid_level(const double *x, long *row) {
+    int d, bits, cand[NX][2];
+    int best = -1;
+    *row = -1;
+    for (d = 0; d < NX; ++d) {
+        const double *e = cmpc_edges + cmpc_edge_off[d];
+        int E = cmpc_n_edges[d], i, hi_i, lo_i;
+        if (!(x[d] >= e[0] && x[d] <= e[E - 1])) return -1;
+        i = last_le(e, E, x[d]);
+        hi_i = clampi(i, 0, E - 2);
+        lo_i = (i >= 0 && e[clampi(i, 0, E - 1)] == x[d]) ? clampi(i - 1, 0, E - 2) : hi_i;
+        cand[d][0] = lo_i;
+        cand[d][1] = hi_i;
+    }
+    for (bits = 0; bits < (1 << NX); ++bits) {
+        long idx = 0;
+        int lv;
+        for (d = 0; d < NX; ++d) idx += cand[d][(bits >> (NX - 1 - d)) & 1] * cmpc_cell_stride[d];
+        lv = cmpc_cell_level[idx];
+        if (lv > 0 && (best < 0 || lv < best)) {
+            best = lv;
+            *row = cmpc_cell_box[idx];
+        }
+    }
+    return best;
+}
+
+static int in_poly(const double *A, const double *b, int rows, const double *x) {
+    int k, i;
+    for (k = 0; k < rows; ++k) {
+        double s = 0.0;
+        for (i = 0; i < NX; ++i) s += A[k * NX + i] * x[i];
+        if (!(s <= b[k])) return 0;
+    }
+    return 1;
+}
+
+static int poly_level(const double *x) {
+    int p, best = -1;
+    for (p = 0; p < CMPC_NPOLY; ++p) {
+        int lv = cmpc_poly_level[p];
+        if ((best < 0 || lv < best) &&
+            in_poly(cmpc_poly_A + cmpc_poly_off[p] * NX, cmpc_poly_b + cmpc_poly_off[p],
+                    cmpc_poly_rows[p], x))
+            best = lv;
+    }
+    return best;
+}
+
+/* level of x and the (level, witness row) of its box */
+static int locate(const double *x, int *wit_level, long *wit_row) {
+    int lv = grid_level(x, wit_row);
+    *wit_level = lv;
+    if (in_poly(cmpc_T_A, cmpc_T_b, CMPC_T_ROWS, x)) return 0;
+    if (CMPC_POLYTOPIC) return poly_level(x);
+    return lv;
+}
+
+int cmpc_level(const double *x) {
+    int wl;
+    long wr;
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    return locate(x, &wl, &wr);
+}
+
+/* ---------------------------------------------------------------- successor check */
+/* all vertex images y[v] in the polytope (rows widened by the check margin) */
+static int images_in_poly(const double *A, const double *b, int rows,
+                          double y[][NX]) {
+    int k, v, i;
+    for (k = 0; k < rows; ++k) {
+        for (v = 0; v < CMPC_NV; ++v) {
+            double s = 0.0, mag = 0.0;
+            for (i = 0; i < NX; ++i) {
+                double t = A[k * NX + i] * y[v][i];
+                s += t;
+                mag += fabs(t);
+            }
+            if (!(s + CMPC_CHECK_REL * mag + CMPC_CHECK_ABS <= b[k])) return 0;
+        }
+    }
+    return 1;
+}
+
+/* the box [lo, hi] covered by the boxes of steps 1..j (every grid cell meeting it) */
+static int box_covered(const double *lo, const double *hi, int j) {
+    int d, a[NX], b[NX], c[NX];
+    for (d = 0; d < NX; ++d) {
+        const double *e = cmpc_edges + cmpc_edge_off[d];
+        int E = cmpc_n_edges[d];
+        if (!(lo[d] >= e[0] && hi[d] <= e[E - 1] && lo[d] < hi[d])) return 0;
+        a[d] = clampi(last_le(e, E, lo[d]), 0, E - 2);
+        b[d] = clampi(last_lt(e, E, hi[d]), 0, E - 2);
+        c[d] = a[d];
+    }
+    for (;;) {
+        long idx = 0;
+        int lv;
+        for (d = 0; d < NX; ++d) idx += c[d] * cmpc_cell_stride[d];
+        lv = cmpc_cell_level[idx];
+        if (lv < 1 || lv > j) return 0;
+        for (d = NX - 1; d >= 0; --d) {
+            if (c[d] < b[d]) { c[d]++; break; }
+            c[d] = a[d];
+        }
+        if (d < 0) return 1;
+    }
+}
+
+/* f(x, u, w) in K_j for every vertex w of W (see the header notes) */
+static int successor_in(const double *x, const double *u, int j) {
+    double y[CMPC_NV][NX];
+    int v, i, p;
+    for (i = 0; i < NU; ++i)
+        if (!(u[i] >= cmpc_u_lo[i] && u[i] <= cmpc_u_hi[i])) return 0;
+    for (v = 0; v < CMPC_NV; ++v) {
+        cmpc_model(x, u, cmpc_wv + v * NW, y[v]);
+        if (!all_finite(y[v], NX)) return 0;
+    }
+    if (images_in_poly(cmpc_T_A, cmpc_T_b, CMPC_T_ROWS, y)) return 1;
+    if (CMPC_POLYTOPIC) {
+        for (p = 0; p < CMPC_NPOLY; ++p)
+            if (cmpc_poly_level[p] <= j &&
+                images_in_poly(cmpc_poly_A + cmpc_poly_off[p] * NX,
+                               cmpc_poly_b + cmpc_poly_off[p], cmpc_poly_rows[p], y))
+                return 1;
+        return 0;
+    } else {
+        double lo[NX], hi[NX];
+        for (i = 0; i < NX; ++i) {
+            double m;
+            lo[i] = hi[i] = y[0][i];
+            for (v = 1; v < CMPC_NV; ++v) {
+                if (y[v][i] < lo[i]) lo[i] = y[v][i];
+                if (y[v][i] > hi[i]) hi[i] = y[v][i];
+            }
+            m = CMPC_CHECK_REL * (fabs(lo[i]) > fabs(hi[i]) ? fabs(lo[i]) : fabs(hi[i]))
+                + CMPC_CHECK_ABS;
+            lo[i] -= m;
+            hi[i] += m;
+        }
+        return box_covered(lo, hi, j);
+    }
+}
+
+/* ---------------------------------------------------------------- the step */
+static double cost_at(const double *x, const double *u) {
+    double c = 0.0;
+    cmpc_cost_arg[0] = x;
+    cmpc_cost_arg[1] = u;
+    cmpc_cost_res[0] = &c;
+    cmpc_cost(cmpc_cost_arg, cmpc_cost_res, cmpc_cost_iw, cmpc_cost_w, 0);
+    return c;
+}
+
+void cmpc_reset(void) { /* the one-step controller keeps nothing between calls */ }
+
+int cmpc_step(const double *x, double *u) {
+    int lvl, wl, i, k, nc = 0, flags = 0, have_opt = 0, chosen = -1, flag;
+    long wr;
+    double cand[5][NU + 1];
+    const double *uw = 0;
+    static double z0[NZ], p[NP], lbx[NZ], ubx[NZ], lbg[NG + 1], ubg[NG + 1], lam_x0[NZ];
+    static double zs[NZ], fval;
+    static const double ts[3] = {0.75, 0.5, 0.25};
+    for (i = 0; i < NU; ++i) u[i] = NAN;
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    lvl = locate(x, &wl, &wr);
+    if (lvl < 0) return CMPC_NOT_CONTROLLABLE;
+    if (lvl == 0) {
+        cmpc_law_arg[0] = x;
+        cmpc_law_res[0] = u;
+        cmpc_law(cmpc_law_arg, cmpc_law_res, cmpc_law_iw, cmpc_law_w, 0);
+        return 0;
+    }
+    if (!solver_ready()) return CMPC_INTERNAL_ERROR;
+    if (wl >= 1 && wr >= 0) uw = cmpc_witness + wr * NU;
+    /* one-step problem into K_{lvl-1}: warm start at the stored control */
+    for (i = 0; i < NU; ++i) z0[i] = uw ? uw[i] : cmpc_u_mid[i];
+    z0[NU] = cost_at(x, z0);
+    for (i = 0; i < NX; ++i) p[i] = x[i];
+    for (i = 0; i < CMPC_R * NX; ++i) p[NX + i] = cmpc_nlp_H[(lvl - 1) * CMPC_R * NX + i];
+    for (i = 0; i < CMPC_R; ++i) p[NX + CMPC_R * NX + i] = cmpc_nlp_h[(lvl - 1) * CMPC_R + i];
+    for (i = 0; i < NU; ++i) { lbx[i] = cmpc_u_lo[i]; ubx[i] = cmpc_u_hi[i]; }
+    lbx[NU] = -INFINITY;
+    ubx[NU] = INFINITY;
+    for (i = 0; i < NG; ++i) { lbg[i] = -INFINITY; ubg[i] = 0.0; }
+    for (i = 0; i < NZ; ++i) lam_x0[i] = 0.0;
+    cmpc_solver_arg[0] = z0; cmpc_solver_arg[1] = p;
+    cmpc_solver_arg[2] = lbx; cmpc_solver_arg[3] = ubx;
+    cmpc_solver_arg[4] = lbg; cmpc_solver_arg[5] = ubg;
+    cmpc_solver_arg[6] = lam_x0; cmpc_solver_arg[7] = cmpc_lam_g0;
+    cmpc_solver_res[0] = zs; cmpc_solver_res[1] = &fval;
+    for (i = 2; i < 6; ++i) cmpc_solver_res[i] = 0;
+    PROFILE_BEGIN();
+    flag = cmpc_solver(cmpc_solver_arg, cmpc_solver_res, cmpc_solver_iw, cmpc_solver_w,
+                       solver_mem);
+    PROFILE_END();
+    if (all_finite(zs, NU)) {
+        for (i = 0; i < NU; ++i) cand[nc][i] = zs[i];
+        nc++;
+        have_opt = 1;
+    }
+    if (flag != 0 || !have_opt) flags |= CMPC_FLAG_SOLVER_FAILED;
+    if (uw) {
+        if (have_opt)
+            for (k = 0; k < 3; ++k, ++nc)
+                for (i = 0; i < NU; ++i) cand[nc][i] = uw[i] + ts[k] * (zs[i] - uw[i]);
+        for (i = 0; i < NU; ++i) cand[nc][i] = uw[i];
+        nc++;
+    }
+    if (nc == 0) return CMPC_INTERNAL_ERROR | flags;
+    for (k = 0; k < nc && chosen < 0; ++k)
+        if (successor_in(x, cand[k], lvl - 1)) chosen = k;
+    if (chosen < 0 && uw && wl <= lvl && successor_in(x, cand[nc - 1], wl - 1))
+        chosen = nc - 1;
+    if (chosen < 0) {
+        k = uw ? nc - 1 : 0;
+        for (i = 0; i < NU; ++i) u[i] = cand[k][i];
+        return lvl | flags | CMPC_FLAG_UNVERIFIED | (uw ? CMPC_FLAG_WITNESS : 0);
+    }
+    for (i = 0; i < NU; ++i) u[i] = cand[chosen][i];
+    if (have_opt && chosen == 0) return lvl | flags;
+    if (uw && chosen == nc - 1) return lvl | flags | CMPC_FLAG_WITNESS;
+    return lvl | flags | CMPC_FLAG_BLEND;
+}
+"""
+
+_CONTRACTIVE = r"""
+#define NZ CMPC_NZ
+#define NG CMPC_NG
+#define NN (CMPC_N * NU)
+
+WORK(cmpc_solver)
+WORK(cmpc_check)
+#if CMPC_HAS_LAW
+WORK(cmpc_law)
+#endif
+
+static double warm[NN];
+static int have_warm = 0;
+static double lam_x[NZ], lam_g[NG + 1];
+static int have_lam = 0;
+
+void cmpc_reset(void) {
+    have_warm = 0;
+    have_lam = 0;
+}
+
+static int in_local_set(const double *x) {
+    int k, i;
+    if (!CMPC_HAS_LAW) return 0;
+    for (k = 0; k < CMPC_S_ROWS; ++k) {
+        double s = 0.0;
+        for (i = 0; i < NX; ++i) s += cmpc_S_A[k * NX + i] * x[i];
+        if (!(s <= cmpc_S_b[k])) return 0;
+    }
+    return 1;
+}
+
+int cmpc_level(const double *x) {
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    return in_local_set(x) ? 0 : 1;
+}
+
+static double clip(double v, double a, double b) { return v < a ? a : (v > b ? b : v); }
+
+int cmpc_step(const double *x, double *u) {
+    static double z0[NZ], p[NX + 1], zs[NZ], fval, lx[NZ], lg[NG + 1], rows[CMPC_NCHECK];
+    static double useq[NN];
+    double e[CMPC_NC], r0 = 0.0;
+    int i, k, same = 1, flag, ok;
+    for (i = 0; i < NU; ++i) u[i] = NAN;
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    for (i = 0; i < NX; ++i) same &= x[i] == cmpc_x_ref[i];
+    for (k = 0; k < CMPC_NC; ++k) {
+        e[k] = 0.0;
+        for (i = 0; i < NX; ++i) e[k] += cmpc_C[k * NX + i] * (x[i] - cmpc_x_ref[i]);
+    }
+    for (k = 0; k < CMPC_NC; ++k) {
+        double a = fabs(e[k]);
+        if (CMPC_NORM == 2) r0 += a * a;
+        else if (a > r0) r0 = a;
+    }
+    if (CMPC_NORM == 2) r0 = sqrt(r0);
+    if (same || !(r0 >= 1e-250)) {
+        for (i = 0; i < NU; ++i) u[i] = cmpc_u_ref[i];
+        return 0;
+    }
+#if CMPC_HAS_LAW
+    if (in_local_set(x)) {
+        cmpc_law_arg[0] = x;
+        cmpc_law_res[0] = u;
+        cmpc_law(cmpc_law_arg, cmpc_law_res, cmpc_law_iw, cmpc_law_w, 0);
+        return 0;
+    }
+#endif
+    if (!solver_ready()) return CMPC_INTERNAL_ERROR;
+    for (i = 0; i < NZ; ++i) z0[i] = 0.0;
+    for (k = 0; k < CMPC_N; ++k)
+        for (i = 0; i < NU; ++i)
+            z0[k * NU + i] = have_warm
+                ? warm[(k + 1 < CMPC_N ? k + 1 : CMPC_N - 1) * NU + i]
+                : clip(cmpc_u_ref[i], cmpc_u_lo[i], cmpc_u_hi[i]);
+    for (i = 0; i < NX; ++i) p[i] = x[i];
+    p[NX] = 1.0 / r0;
+    cmpc_solver_arg[0] = z0; cmpc_solver_arg[1] = p;
+    cmpc_solver_arg[2] = cmpc_lbz; cmpc_solver_arg[3] = cmpc_ubz;
+    cmpc_solver_arg[4] = cmpc_lbg; cmpc_solver_arg[5] = cmpc_ubg;
+    cmpc_solver_arg[6] = have_lam ? lam_x : 0;
+    cmpc_solver_arg[7] = have_lam ? lam_g : 0;
+    cmpc_solver_res[0] = zs; cmpc_solver_res[1] = &fval; cmpc_solver_res[2] = 0;
+    cmpc_solver_res[3] = lx; cmpc_solver_res[4] = lg; cmpc_solver_res[5] = 0;
+    PROFILE_BEGIN();
+    flag = cmpc_solver(cmpc_solver_arg, cmpc_solver_res, cmpc_solver_iw, cmpc_solver_w,
+                       solver_mem);
+    PROFILE_END();
+    ok = all_finite(zs, NZ);
+    if (ok) {
+        for (i = 0; i < NZ; ++i) lam_x[i] = lx[i];
+        for (i = 0; i < NG; ++i) lam_g[i] = lg[i];
+        have_lam = 1;
+        for (k = 0; k < CMPC_N; ++k)
+            for (i = 0; i < NU; ++i)
+                useq[k * NU + i] = clip(zs[k * NU + i], cmpc_u_lo[i], cmpc_u_hi[i]);
+        cmpc_check_arg[0] = useq;
+        cmpc_check_arg[1] = x;
+        cmpc_check_res[0] = rows;
+        cmpc_check(cmpc_check_arg, cmpc_check_res, cmpc_check_iw, cmpc_check_w, 0);
+        for (i = 0; i < CMPC_NCHECK && ok; ++i)
+            ok = rows[i] >= cmpc_check_lo[i] && rows[i] <= cmpc_check_hi[i];
+        if (ok) {
+            for (i = 0; i < NN; ++i) warm[i] = useq[i];
+            have_warm = 1;
+            for (i = 0; i < NU; ++i) u[i] = useq[i];
+            return 1 | (flag != 0 ? CMPC_FLAG_SOLVER_FAILED : 0);
+        }
+    } else {
+        have_lam = 0;
+    }
+    /* fallback: the next move of the last checked sequence, else u_ref (clipped) */
+    if (have_warm) {
+        for (k = 0; k + 1 < CMPC_N; ++k)
+            for (i = 0; i < NU; ++i) warm[k * NU + i] = warm[(k + 1) * NU + i];
+        for (i = 0; i < NU; ++i) u[i] = warm[i];
+    } else {
+        for (i = 0; i < NU; ++i) u[i] = clip(cmpc_u_ref[i], cmpc_u_lo[i], cmpc_u_hi[i]);
+    }
+    return 1 | CMPC_FLAG_FALLBACK | CMPC_FLAG_UNVERIFIED |
+           (flag != 0 || !all_finite(zs, NZ) ? CMPC_FLAG_SOLVER_FAILED : 0);
+}
+"""
+
+
+def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
+    from .export import (
+        BAD_INPUT,
+        CHECK_ABS,
+        CHECK_REL,
+        FLAG_BLEND,
+        FLAG_FALLBACK,
+        FLAG_SOLVER_FAILED,
+        FLAG_UNVERIFIED,
+        FLAG_WITNESS,
+        INTERNAL_ERROR,
+        NOT_CONTROLLABLE,
+    )
+    what = ("one-step MPC along a sequence of controllable sets" if kind == "set_sequence"
+            else f"contractive MPC, horizon {sizes.get('horizon')}")
+    levels = ("the level i of x: 0 = x in the terminal set (local law applied), i >= 1 = "
+              "x in K_i \\ K_{i-1} (one-step problem into K_{i-1})" if kind == "set_sequence"
+              else "0 = local law (or x at the reference), 1 = the MPC problem was solved")
+    return f"""/* Controller exported from casadi_cmpc: {what}.
+ * Model '{model.name}': n = {model.n} states, m = {model.m} inputs, l = {model.l} disturbances.
+ * Solver: {solver}{' (standalone C, libc and libm only)' if solver == 'sqp' else
+                   ' (links the IPOPT library shipped with casadi)'}.
+ *
+ *   int cmpc_step(const double *x, double *u);
+ *       x: state (CMPC_NX), u: control written (CMPC_NU). Returns a code >= 0 whose low 16
+ *       bits (CMPC_LEVEL(code)) are {levels};
+ *       flags above them say how u was obtained (see below). Negative codes: no control
+ *       (u is NaN): CMPC_NOT_CONTROLLABLE (x in no set), CMPC_BAD_INPUT (x not finite),
+ *       CMPC_INTERNAL_ERROR (solver memory).
+ *   int cmpc_level(const double *x);   the level look-up alone (-1: in no set)
+ *   void cmpc_reset(void);             forget warm starts
+ *   void cmpc_model(const double *x, const double *u, const double *w, double *x_next);
+ *                                      the model f(x, u, w) (for simulation)
+ *
+ * The successor check evaluates the model in floating point at the candidate control and
+ * the vertices of W, with images widened by CMPC_CHECK_REL (relative); for models affine in
+ * w it is exact up to rounding. It is a run-time check, not an interval proof.
+ */
+#ifndef CMPC_CONTROLLER_H
+#define CMPC_CONTROLLER_H
+
+#define CMPC_KIND "{kind}"
+#define CMPC_NX {model.n}
+#define CMPC_NU {model.m}
+#define CMPC_NW {model.l}
+
+#define CMPC_NOT_CONTROLLABLE ({NOT_CONTROLLABLE})
+#define CMPC_BAD_INPUT ({BAD_INPUT})
+#define CMPC_INTERNAL_ERROR ({INTERNAL_ERROR})
+#define CMPC_LEVEL(code) ((code) & 0xFFFF)
+/* the solver's control failed the check; a blend with the stored control passed it */
+#define CMPC_FLAG_BLEND {FLAG_BLEND}
+/* the stored proving control of x's box was applied */
+#define CMPC_FLAG_WITNESS {FLAG_WITNESS}
+/* the solver reported a failure or returned a non-finite control */
+#define CMPC_FLAG_SOLVER_FAILED {FLAG_SOLVER_FAILED}
+/* no candidate passed the check (the stored control, or u_ref, is applied unchecked) */
+#define CMPC_FLAG_UNVERIFIED {FLAG_UNVERIFIED}
+/* contractive MPC: the next move of the last checked sequence (or u_ref) was applied */
+#define CMPC_FLAG_FALLBACK {FLAG_FALLBACK}
+
+#define CMPC_CHECK_REL {CHECK_REL!r}
+#define CMPC_CHECK_ABS {CHECK_ABS!r}
+
+int cmpc_step(const double *x, double *u);
+int cmpc_level(const double *x);
+void cmpc_reset(void);
+void cmpc_model(const double *x, const double *u, const double *w, double *x_next);
+
+#endif
+"""
+
+
+def _source(model: Any, body: str) -> str:
+    return ("/* Exported controller logic (generated by casadi_cmpc; do not edit). */\n"
+            "#include <math.h>\n#include \"cmpc_controller.h\"\n#include \"cmpc_casadi.h\"\n"
+            "#include \"cmpc_tables.h\"\n" + _COMMON + body)
+
+
+def sequence_source(model: Any) -> str:
+    return _source(model, _SEQUENCE)
+
+
+def contractive_source(model: Any) -> str:
+    return _source(model, _CONTRACTIVE)
+
+
+def example(model: Any, x0: np.ndarray, steps: int, seed: int) -> str:
+    W = model.W.as_array() if model.l else np.zeros((0, 2))
+    x0s = ", ".join(repr(float(v)) for v in x0)
+    wlo = ", ".join(repr(float(v)) for v in W[:, 0]) or "0.0"
+    whi = ", ".join(repr(float(v)) for v in W[:, 1]) or "0.0"
+    return f"""/* Closed loop of the exported controller on the generated model: x+ = f(x, u, w),
+ * w drawn uniformly in W. Prints one line per step. Build with `make`, run ./example. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include "cmpc_controller.h"
+
+static const double x_init[CMPC_NX] = {{{x0s}}};
+static const double w_lo[CMPC_NW > 0 ? CMPC_NW : 1] = {{{wlo}}};
+static const double w_hi[CMPC_NW > 0 ? CMPC_NW : 1] = {{{whi}}};
+
+static unsigned long long rng_state = {int(seed) * 2654435761 + 88172645463325252};
+
+static double uniform(void) {{
+    rng_state = rng_state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return (double)(rng_state >> 11) / 9007199254740992.0;
+}}
+
+int main(int argc, char **argv) {{
+    double x[CMPC_NX], u[CMPC_NU], w[CMPC_NW > 0 ? CMPC_NW : 1], xn[CMPC_NX];
+    int k, i, steps = argc > 1 ? atoi(argv[1]) : {int(steps)};
+    for (i = 0; i < CMPC_NX; ++i) x[i] = x_init[i];
+    printf("step level flags x u\\n");
+    for (k = 0; k < steps; ++k) {{
+        int code = cmpc_step(x, u);
+        if (code < 0) {{
+            printf("%d stop: code %d (%s)\\n", k, code,
+                   code == CMPC_NOT_CONTROLLABLE ? "not controllable" : "error");
+            return 1;
+        }}
+        printf("%d %d 0x%x", k, CMPC_LEVEL(code), (unsigned)code >> 16);
+        for (i = 0; i < CMPC_NX; ++i) printf(" %.9g", x[i]);
+        for (i = 0; i < CMPC_NU; ++i) printf(" %.9g", u[i]);
+        printf("\\n");
+        for (i = 0; i < CMPC_NW; ++i) w[i] = w_lo[i] + (w_hi[i] - w_lo[i]) * uniform();
+        cmpc_model(x, u, w, xn);
+        for (i = 0; i < CMPC_NX; ++i) x[i] = xn[i];
+    }}
+    return 0;
+}}
+"""
+
+
+def makefile(solver: str, inc: str, lib: str) -> str:
+    ipopt = solver == "ipopt"
+    return f"""# Builds the exported controller with plain gcc (C99).
+#   make            libcmpc.so and the example program
+#   ./example [N]   closed loop of N steps on the generated model
+CC ?= gcc
+CFLAGS ?= -std=c99 -Wall -Wextra -Werror -O2
+SOFLAGS = -shared -fPIC
+{'IPOPT_CFLAGS = ' + inc if ipopt else '# standalone: no external library'}
+{'IPOPT_LIBS = ' + lib if ipopt else 'IPOPT_LIBS ='}
+{'' if ipopt else 'IPOPT_CFLAGS ='}
+SRC = cmpc_controller.c cmpc_casadi.c
+
+all: libcmpc.so example
+
+libcmpc.so: $(SRC) cmpc_controller.h cmpc_tables.h cmpc_casadi.h
+\t$(CC) $(CFLAGS) $(IPOPT_CFLAGS) $(SOFLAGS) $(SRC) -o $@ $(IPOPT_LIBS) -lm
+
+example: example.c $(SRC) cmpc_controller.h cmpc_tables.h cmpc_casadi.h
+\t$(CC) $(CFLAGS) $(IPOPT_CFLAGS) example.c $(SRC) -o $@ $(IPOPT_LIBS) -lm
+
+clean:
+\trm -f libcmpc.so example
+
+.PHONY: all clean
+"""
+
+
+def readme(kind: str, solver: str, model: Any) -> str:
+    return f"""Controller exported from casadi_cmpc ({kind}, solver {solver})
+for model '{model.name}'.
+
+  make          builds libcmpc.so and ./example (gcc, -std=c99 -Wall -Wextra -Werror -O2)
+  ./example 40  runs 40 closed-loop steps on the generated model and prints them
+
+API: see cmpc_controller.h (int cmpc_step(const double *x, double *u)).
+Files: cmpc_casadi.c/.h (CasADi-generated solver and functions), cmpc_tables.h (set tables),
+cmpc_controller.c (look-up, local law, solver call, successor check, fallback).
+"""

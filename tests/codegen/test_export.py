@@ -1,0 +1,192 @@
+"""C export: the compiled controller agrees with the Python one; bad input is refused."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import casadi_cmpc as cm
+from casadi_cmpc.codegen import export_c, load
+from casadi_cmpc.codegen.export import ExportError
+from casadi_cmpc.mpc.sequence import SetSequenceMPC
+
+needs_cc = pytest.mark.skipif(shutil.which("gcc") is None or shutil.which("make") is None,
+                              reason="building the export needs gcc and make")
+
+
+@pytest.fixture(scope="module")
+def e9(tmp_path_factory):
+    ex = cm.models.load("cannon_robust")
+    cfg = ex.info["sequence"]
+    seq = cm.controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=True,
+                               law=ex.local_law, progress=False)
+    ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
+                          local_law=ex.local_law, solver="sqp", robust=True)
+    d = tmp_path_factory.mktemp("e9")
+    info = export_c(ctrl, d / "c", x0=[1.75, -1.6], steps=25)
+    return ex, seq, ctrl, info
+
+
+@needs_cc
+def test_e9_compiled_agrees_with_python_on_1000_states(e9):
+    ex, seq, ctrl, info = e9
+    C = load(info.directory)
+    B = np.concatenate([s["boxes"] for s in seq.steps])
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(B[:, :, 0], B[:, :, 1])[rng.choice(len(B), 1000)]
+    pts[:50] = rng.uniform(ex.terminal.bounding_box().lo, ex.terminal.bounding_box().hi,
+                           (50, 2))
+    levels = set()
+    for x in pts:
+        r = ctrl.solve(x)
+        u, code = C.step(x)
+        d = C.decode(code)
+        assert d["level"] == r.horizon == C.level(x) == seq.level(x)
+        levels.add(d["level"])
+        assert np.abs(u - r.u).max() <= 1e-6
+        # the applied control is certified by Python: the successor lies in K_{i-1}
+        if r.horizon:
+            assert r.certificate.label == "verified"
+    assert len(levels) > 20 and 0 in levels
+    # a state outside every set, and a NaN state
+    u, code = C.step([5.0, 5.0])
+    assert code == -1 and np.isnan(u).all() and ctrl.solve([5.0, 5.0]).horizon is None
+    assert C.step([np.nan, 0.0])[1] == -2
+
+
+@needs_cc
+def test_e9_closed_loop_matches_python_step_by_step(e9):
+    ex, seq, ctrl, info = e9
+    C = load(info.directory)
+    rng = np.random.default_rng(3)
+    x = xc = np.array([1.75, -1.6])
+    for _ in range(40):
+        w = rng.uniform(ex.model.W.lo, ex.model.W.hi)
+        r = ctrl.solve(x)
+        u, code = C.step(xc)
+        assert C.decode(code)["level"] == r.horizon
+        assert np.abs(u - r.u).max() <= 1e-6
+        x = ex.model.step(x, r.u, w)
+        xc = C.model(xc, u, w)
+        assert np.abs(x - xc).max() <= 1e-9 * (1 + np.abs(x).max())
+    assert seq.level(x) == 0  # the loop reached the terminal set
+
+
+@needs_cc
+def test_generated_code_is_strict_c99_standalone_and_the_example_runs(e9):
+    *_, info = e9
+    d = info.directory
+    mk = (d / "Makefile").read_text()
+    assert "-std=c99 -Wall -Wextra -Werror -O2" in mk
+    subprocess.run(["make", "-C", str(d)], check=True, capture_output=True)
+    ldd = subprocess.run(["ldd", str(d / "libcmpc.so")], capture_output=True, text=True)
+    libs = [ln.split()[0] for ln in ldd.stdout.splitlines() if ln.strip()]
+    assert all(any(k in lib for k in ("linux-vdso", "libc.so", "libm.so", "ld-linux"))
+               for lib in libs), libs
+    out = subprocess.run([str(d / "example"), "25"], capture_output=True, text=True,
+                         check=True).stdout.splitlines()
+    rows = [ln.split() for ln in out[1:]]
+    assert len(rows) == 25
+    levels = [int(r[1]) for r in rows]
+    assert levels[0] > 0 and levels[-1] == 0
+    assert all(b <= a - 1 or b == 0 for a, b in zip(levels[:-1], levels[1:], strict=True)
+               if a > 0)
+
+
+@pytest.fixture(scope="module")
+def e8(tmp_path_factory):
+    ex = cm.models.load("cannon")
+    kw = dict(ex.info["mpc"])
+    kw["solver"] = "sqp"
+    ctrl = cm.ContractiveMPC(ex.model, **kw)
+    d = tmp_path_factory.mktemp("e8")
+    return ex, ctrl, export_c(ctrl, d / "c", x0=[1.9, -1.5])
+
+
+@needs_cc
+def test_e8_horizon_10_closed_loop_matches_python(e8):
+    ex, ctrl, info = e8
+    C = load(info.directory)
+    ctrl.reset()
+    x = xc = np.array([1.9, -1.5])
+    for _ in range(40):
+        r = ctrl.solve(x)
+        u, code = C.step(xc)
+        assert np.abs(u - r.u).max() <= 1e-6
+        assert C.decode(code)["level"] == (0 if r.mode == "local_law" else 1)
+        x = ex.model.step(x, r.u)
+        xc = C.model(xc, u)
+    assert np.abs(x).max() < 0.1
+
+
+@needs_cc
+def test_e8_states_solved_by_the_local_solver_agree(e8):
+    """From a cold start at each state, wherever Python's local solver gives the verified
+    sequence (no set inversion), the C controller returns the same move."""
+    ex, ctrl, info = e8
+    C = load(info.directory)
+    rng = np.random.default_rng(11)
+    n = 0
+    for p in rng.uniform(ex.model.X.lo, ex.model.X.hi, (1000, 2)):
+        ctrl.reset()
+        C.reset()
+        r = ctrl.solve(p)
+        u, code = C.step(p)
+        if r.certificate.label == "local_law" or (
+                r.certificate.label == "verified" and "search_time" not in r.stats):
+            n += 1
+            assert np.abs(u - r.u).max() <= 1e-6, (p, r.u, u, hex(code))
+    assert n >= 800
+
+
+def test_bad_input_is_refused(e9, tmp_path):
+    ex, seq, ctrl, info = e9
+    with pytest.raises(ExportError, match="not empty"):
+        export_c(ctrl, info.directory)
+    with pytest.raises(ValueError, match="solver"):
+        export_c(ctrl, tmp_path / "a", solver="qpoases")
+    with pytest.raises(TypeError, match="SetSequenceMPC or a ContractiveMPC"):
+        export_c(object(), tmp_path / "b")
+    # a sequence with the terminal set only: the sets were never computed
+    from casadi_cmpc.control.linear_sets import SetSequence
+    bare = SetSequence(sets=[seq.sets[0]], converged_at=None)
+    with pytest.raises((ExportError, TypeError)):
+        export_c(SetSequenceMPC(ex.model, bare, local_law=ex.local_law, solver="sqp"),
+                 tmp_path / "c")
+    # a contractive MPC without a fixed horizon
+    with pytest.raises(ExportError, match="fixed horizon"):
+        export_c(cm.ContractiveMPC(cm.models.load("cannon").model, solver="sqp"),
+                 tmp_path / "d")
+    # overwrite=True replaces the contents
+    (tmp_path / "e").mkdir()
+    (tmp_path / "e" / "old.txt").write_text("x")
+    info2 = export_c(ctrl, tmp_path / "e", overwrite=True)
+    assert not (tmp_path / "e" / "old.txt").exists() and (info2.directory / "Makefile").exists()
+
+
+class _Sq(ca.Callback):
+    def __init__(self):
+        ca.Callback.__init__(self)
+        self.construct("sq", {})
+
+    def get_n_in(self):
+        return 1
+
+    def get_n_out(self):
+        return 1
+
+    def eval(self, arg):
+        return [arg[0] ** 2]
+
+
+def test_an_operation_the_generator_cannot_emit_is_refused(tmp_path):
+    from casadi_cmpc.codegen.export import _generate
+
+    x = ca.MX.sym("x")
+    F = ca.Function("F", [x], [_Sq()(x) + x])
+    with pytest.raises(ExportError, match="cannot generate C for 'F'"):
+        _generate(tmp_path, [F])
