@@ -355,6 +355,15 @@ class SetSequenceMPC:
         return (f"SetSequenceMPC(model='{self.model.name}', sets={len(self.seq)}, "
                 f"solver='{self.solver}', robust={self.robust}, minimax='{self.minimax}')")
 
+    def export_c(self, directory: Any, solver: str = "sqp", **kw: Any) -> Any:
+        """Write this controller as standalone C: the one-step solver, the model, the local
+        law and the set tables (level look-up, stored proving controls); see
+        :func:`casadi_cmpc.codegen.export_c` for the files, the ``cmpc_step`` API and the
+        options. Returns an :class:`~casadi_cmpc.codegen.ExportInfo`."""
+        from ..codegen import export_c
+
+        return export_c(self, directory, solver=solver, **kw)
+
     def reset(self) -> None:
         """Forget the previous call (the controller keeps no state between calls)."""
         self.last_info = {}

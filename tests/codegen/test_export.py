@@ -27,7 +27,7 @@ def e9(tmp_path_factory):
     ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
                           local_law=ex.local_law, solver="sqp", robust=True)
     d = tmp_path_factory.mktemp("e9")
-    info = export_c(ctrl, d / "c", x0=[1.75, -1.6], steps=25)
+    info = ctrl.export_c(d / "c", x0=[1.75, -1.6], steps=25)
     return ex, seq, ctrl, info
 
 
@@ -104,7 +104,7 @@ def e8(tmp_path_factory):
     kw["solver"] = "sqp"
     ctrl = cm.ContractiveMPC(ex.model, **kw)
     d = tmp_path_factory.mktemp("e8")
-    return ex, ctrl, export_c(ctrl, d / "c", x0=[1.9, -1.5])
+    return ex, ctrl, ctrl.export_c(d / "c", x0=[1.9, -1.5])
 
 
 @needs_cc

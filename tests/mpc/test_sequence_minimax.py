@@ -222,9 +222,10 @@ def test_closed_loops_box_union(gain):
     model, _, _, seq = gain
     ctrl = cm.SetSequenceMPC(model, seq, np.eye(2), R2, K2)
     rng = np.random.default_rng(5)
-    x0s = states(seq, rng, 3, [-2, -2], [2, 2], (8, None))
-    assert len(x0s) == 3
-    runs = [(x0s[0], None), (x0s[1], None), (x0s[2], np.array([0.0]))]  # w = 0: interior
+    x0s = states(seq, rng, 6, [-2, -2], [2, 2], (8, None))
+    assert len(x0s) == 6
+    # w uniform in W, and w = 0 (the interior maximiser of the gain) at every step
+    runs = [(x0, None) for x0 in x0s[:4]] + [(x0, np.array([0.0])) for x0 in x0s[4:]]
     for x0, wf in runs:
         xf, levels = closed_loop(model, seq, ctrl, x0, 40, rng, wf)
         assert levels[0] >= 8 and levels[-1] == 0
