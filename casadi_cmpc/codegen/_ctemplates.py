@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -72,7 +73,7 @@ _SEQUENCE = r"""
 #define NG (CMPC_NV * (1 + CMPC_R))
 
 WORK(cmpc_law)
-WORK(cmpc_cost)
+WORK(cmpc_start)
 WORK(cmpc_solver)
 
 /* ---------------------------------------------------------------- level look-up */
@@ -247,13 +248,23 @@ static int successor_in(const double *x, const double *u, int j) {
 }
 
 /* ---------------------------------------------------------------- the step */
-static double cost_at(const double *x, const double *u) {
-    double c = 0.0;
-    cmpc_cost_arg[0] = x;
-    cmpc_cost_arg[1] = u;
-    cmpc_cost_res[0] = &c;
-    cmpc_cost(cmpc_cost_arg, cmpc_cost_res, cmpc_cost_iw, cmpc_cost_w, 0);
-    return c;
+/* The solver's start (as SetSequenceMPC._initial): u0 from the generated cmpc_start (one
+ * Newton step on the mean vertex cost from the guess), the epigraph variable at the first
+ * largest finite vertex cost and multiplier 1 on that row. */
+static void solver_start(const double *x, const double *guess, double *z0, double *lam) {
+    double c[CMPC_NV];
+    int v, k = 0;
+    double best = -INFINITY;
+    cmpc_start_arg[0] = x;
+    cmpc_start_arg[1] = guess;
+    cmpc_start_res[0] = z0;
+    cmpc_start_res[1] = c;
+    cmpc_start(cmpc_start_arg, cmpc_start_res, cmpc_start_iw, cmpc_start_w, 0);
+    for (v = 0; v < CMPC_NV; ++v)
+        if (isfinite(c[v]) && c[v] > best) { best = c[v]; k = v; }
+    z0[NU] = c[k];
+    for (v = 0; v < NG; ++v) lam[v] = 0.0;
+    lam[k * (1 + CMPC_R)] = 1.0;
 }
 
 void cmpc_reset(void) { /* the one-step controller keeps nothing between calls */ }
@@ -263,7 +274,8 @@ int cmpc_step(const double *x, double *u) {
     long wr;
     double cand[5][NU + 1];
     const double *uw = 0;
-    static double z0[NZ], p[NP], lbx[NZ], ubx[NZ], lbg[NG + 1], ubg[NG + 1], lam_x0[NZ];
+    static double z0[NZ], p[NP], lbx[NZ], ubx[NZ], lbg[NG + 1], ubg[NG + 1], lam_x0[NZ],
+        lam_g0[NG + 1];
     static double zs[NZ], fval;
     static const double ts[3] = {0.75, 0.5, 0.25};
     for (i = 0; i < NU; ++i) u[i] = NAN;
@@ -278,9 +290,8 @@ int cmpc_step(const double *x, double *u) {
     }
     if (!solver_ready()) return CMPC_INTERNAL_ERROR;
     if (wl >= 1 && wr >= 0) uw = cmpc_witness + wr * NU;
-    /* one-step problem into K_{lvl-1}: warm start at the stored control */
-    for (i = 0; i < NU; ++i) z0[i] = uw ? uw[i] : cmpc_u_mid[i];
-    z0[NU] = cost_at(x, z0);
+    /* one-step problem into K_{lvl-1}, started from the stored control (see solver_start) */
+    solver_start(x, uw ? uw : cmpc_u_mid, z0, lam_g0);
     for (i = 0; i < NX; ++i) p[i] = x[i];
     for (i = 0; i < CMPC_R * NX; ++i) p[NX + i] = cmpc_nlp_H[(lvl - 1) * CMPC_R * NX + i];
     for (i = 0; i < CMPC_R; ++i) p[NX + CMPC_R * NX + i] = cmpc_nlp_h[(lvl - 1) * CMPC_R + i];
@@ -292,7 +303,7 @@ int cmpc_step(const double *x, double *u) {
     cmpc_solver_arg[0] = z0; cmpc_solver_arg[1] = p;
     cmpc_solver_arg[2] = lbx; cmpc_solver_arg[3] = ubx;
     cmpc_solver_arg[4] = lbg; cmpc_solver_arg[5] = ubg;
-    cmpc_solver_arg[6] = lam_x0; cmpc_solver_arg[7] = cmpc_lam_g0;
+    cmpc_solver_arg[6] = lam_x0; cmpc_solver_arg[7] = lam_g0;
     cmpc_solver_res[0] = zs; cmpc_solver_res[1] = &fval;
     for (i = 2; i < 6; ++i) cmpc_solver_res[i] = 0;
     PROFILE_BEGIN();
@@ -473,6 +484,8 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
     levels = ("the level i of x: 0 = x in the terminal set (local law applied), i >= 1 = "
               "x in K_i \\ K_{i-1} (one-step problem into K_{i-1})" if kind == "set_sequence"
               else "0 = local law (or x at the reference), 1 = the MPC problem was solved")
+    levels = textwrap.fill("bits (CMPC_LEVEL(code)) are " + levels, 88,
+                           initial_indent=" *       ", subsequent_indent=" *       ")
     return f"""/* Controller exported from casadi_cmpc: {what}.
  * Model '{model.name}': n = {model.n} states, m = {model.m} inputs, l = {model.l} disturbances.
  * Solver: {solver}{' (standalone C, libc and libm only)' if solver == 'sqp' else
@@ -480,7 +493,7 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
  *
  *   int cmpc_step(const double *x, double *u);
  *       x: state (CMPC_NX), u: control written (CMPC_NU). Returns a code >= 0 whose low 16
- *       bits (CMPC_LEVEL(code)) are {levels};
+{levels};
  *       flags above them say how u was obtained (see below). Negative codes: no control
  *       (u is NaN): CMPC_NOT_CONTROLLABLE (x in no set), CMPC_BAD_INPUT (x not finite),
  *       CMPC_INTERNAL_ERROR (solver memory).

@@ -238,7 +238,13 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     (exact grid of the box bounds). The images are widened by ``1e-12`` relative (the
     check errs on the strict side). For models affine in w the vertex images span the image
     of W, so the check is exact up to rounding; it is not an interval proof (the Python
-    controller's certificate is).
+    controller's certificate is). A robust controller of a model not affine in w is refused
+    (ExportError): its vertex images would not bound the image of W.
+
+    **The solver's start** is the stored control of x's box (the middle of U without one),
+    moved by one Newton step on the mean vertex cost (kept when it lowers that mean), with
+    the epigraph variable at the largest vertex cost and multiplier 1 on that row; the
+    Python controller starts the same way, so both take the same iterations.
     """
     from ..mpc.contractive import ContractiveMPC
     from ..mpc.sequence import SetSequenceMPC
@@ -300,6 +306,12 @@ class _SequenceExport:
             raise ExportError("the interval minimax (Alg 5.3) of this controller has no C "
                               "form; build the controller with minimax='vertices' to export "
                               "it (feasibility is certified either way)")
+        if ctrl.robust and not model.is_affine_in_w:
+            raise ExportError(
+                f"model '{model.name}' is not affine in w: the C successor check evaluates "
+                "the model at the vertices of W, which bound the image f(x, u, W) only for "
+                "models affine in w; write the disturbance so that it enters affinely (e.g. "
+                "take g(w) as the new disturbance, with its interval range as W)")
         if len(seq.sets) < 2:
             raise ExportError("the sequence holds only the terminal set: compute the sets "
                               "first (cm.controllable_sets)")
@@ -375,10 +387,10 @@ class _SequenceExport:
         S = _solver_for_export(nlp, "cmpc_solver", self.solver, py_solver, opts)
         x = ca.SX.sym("x", model.n)
         u = ca.SX.sym("u", model.m)
-        cost = ca.Function("cmpc_cost", [x, u], [ctrl._costfun(x, u)[0]], ["x", "u"],
-                           ["cost"])
+        u0, c = ctrl._start(x, u)
+        start = ca.Function("cmpc_start", [x, u], [u0, c], ["x", "u_guess"], ["u0", "costs"])
         law = ca.Function("cmpc_law", [x], [ctrl._law(x)], ["x"], ["u"])
-        return [S, _model_fun(model), law, cost]
+        return [S, _model_fun(model), law, start]
 
     def tables(self) -> str:
         ctrl, model = self.ctrl, self.ctrl.model
@@ -404,7 +416,6 @@ class _SequenceExport:
         # NLP parameters (H column-major, h) per target level j = 0..L-2
         out.append(_c_array("double", "cmpc_nlp_H", self.nlp_H))
         out.append(_c_array("double", "cmpc_nlp_h", self.nlp_h))
-        out.append(_c_array("double", "cmpc_lam_g0", ctrl._lam0))
         # box grid: edges per dimension, level and witness row per cell (C order)
         e_n = [e.size for e in self.edges]
         e_off = np.cumsum([0] + e_n[:-1])

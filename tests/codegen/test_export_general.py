@@ -1,0 +1,234 @@
+"""C export beyond the thesis examples: 3 and 4 states, two inputs, a non-zero equilibrium
+(x_e, u_e), polytopic sequences, and the IPOPT variant.
+
+Each test compares the compiled controller with the Python one that was exported: the same
+level, the same control to 1e-6, and closed loops that match step by step under the same
+random disturbance.
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import casadi as ca
+import control
+import numpy as np
+import pytest
+
+import casadi_cmpc as cm
+from casadi_cmpc.codegen import load
+from casadi_cmpc.mpc.sequence import SetSequenceMPC
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None or shutil.which("make") is None,
+                                reason="building the export needs gcc and make")
+
+XE = np.array([0.5, -0.3, 0.2])
+UE = np.array([0.1, -0.2])
+A3 = np.array([[0.2, 1.0, 0.0], [0.0, 0.1, 1.0], [0.3, 0.0, -0.4]])
+
+
+def three_state_model(affine_w: bool = True) -> cm.Model:
+    """x+ = x + 0.1 (A dx + g(dx) + B(dx) du + e w), dx = x - x_e, du = u - u_e: a
+    nonlinear model with its equilibrium at (x_e, u_e) != 0, affine in w (else the
+    disturbance enters as w + 20 w^2, whose range over W is not spanned by its vertices)."""
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u", 2)
+    w = ca.SX.sym("w")
+    if not affine_w:
+        w = w + 20 * w ** 2
+    dx, du = x - ca.DM(XE), u - ca.DM(UE)
+    g = ca.vertcat(0.3 * dx[1] ** 2, -0.2 * ca.sin(dx[0]) * dx[2], 0.1 * dx[0] * dx[1])
+    B = ca.vertcat(ca.horzcat(1 + 0.2 * ca.cos(dx[1]), 0), ca.horzcat(0.1 * dx[0], 1),
+                   ca.horzcat(0, 0.8 + 0.1 * dx[2] ** 2))
+    f = x + 0.1 * (ca.mtimes(ca.DM(A3), dx) + g + ca.mtimes(B, du)
+                   + ca.DM([0.5, 0.3, -0.2]) * w)
+    return cm.Model(x=x, u=u, w=ca.symvar(w)[0], f=f, X=cm.Box(XE - 0.6, XE + 0.6),
+                    U=cm.Box(UE - 1.0, UE + 1.0), W=cm.Box([-0.05], [0.05]),
+                    name="three_state_export")
+
+
+def lqr_law(model: cm.Model, A: np.ndarray, B: np.ndarray, xe: np.ndarray,
+            ue: np.ndarray) -> ca.SX:
+    """u = u_e + K (x - x_e), K the discrete LQR gain (Q = I, R = I) of (A, B)."""
+    K, _, _ = control.dlqr(A, B, np.eye(A.shape[0]), np.eye(B.shape[1]))
+    return ca.DM(ue) - ca.mtimes(ca.DM(np.asarray(K)), model.x - ca.DM(xe))
+
+
+@pytest.fixture(scope="module")
+def tri(tmp_path_factory):
+    model = three_state_model()
+    Ad = np.eye(3) + 0.1 * A3
+    Bd = 0.1 * np.array([[1.2, 0.0], [0.0, 1.0], [0.0, 0.8]])
+    law = lqr_law(model, Ad, Bd, XE, UE)
+    T = cm.Polytope.from_box(cm.Box(XE - 0.15, XE + 0.15))
+    cert = cm.certify_invariant(model, T, law, 0.02, progress=False)
+    assert cert.label == "proved"
+    seq = cm.controllable_sets(model, T, 0.1, robust=True, certificate=cert, law=law,
+                               max_steps=2, progress=False)
+    ctrl = SetSequenceMPC(model, seq, Q=np.eye(3), R=0.1 * np.eye(2), x_ref=XE,
+                          local_law=law, solver="sqp", robust=True)
+    info = ctrl.export_c(tmp_path_factory.mktemp("tri") / "c", steps=10)
+    return model, seq, ctrl, load(info.directory)
+
+
+def sample_levels(seq, rng, k):
+    """k random states of the proven boxes and of T."""
+    B = np.concatenate([s["boxes"] for s in seq.steps])
+    P = rng.uniform(B[:, :, 0], B[:, :, 1])[rng.choice(len(B), k)]
+    return P
+
+
+def test_three_states_two_inputs_nonzero_equilibrium_agree(tri):
+    model, seq, ctrl, C = tri
+    rng = np.random.default_rng(3)
+    pts = sample_levels(seq, rng, 300)
+    pts[:30] = XE + rng.uniform(-0.15, 0.15, (30, 3))
+    levels = set()
+    for x in pts:
+        r = ctrl.solve(x)
+        u, code = C.step(x)
+        assert C.decode(code)["level"] == r.horizon == C.level(x) == seq.level(x)
+        assert np.abs(u - r.u).max() <= 1e-6, (x, r.u, u, hex(code))
+        levels.add(r.horizon)
+        # the compiled model is the Python model
+        w = rng.uniform(-0.05, 0.05, 1)
+        assert np.allclose(C.model(x, u, w), model.step(x, u, w), rtol=0, atol=1e-14)
+    assert levels == {0, 1, 2}
+    # at the equilibrium the local law gives u_e
+    u, code = C.step(XE)
+    assert code == 0 and np.allclose(u, UE, atol=1e-14)
+
+
+def test_three_state_closed_loop_matches_step_by_step(tri):
+    model, seq, ctrl, C = tri
+    rng = np.random.default_rng(5)
+    B = seq.steps[-1]["boxes"]
+    c = 0.5 * (B[..., 0] + B[..., 1])
+    c = c[np.array([seq.level(q) == 2 for q in c])]
+    x = xc = c[np.argmax(np.abs(c - XE).sum(axis=1))]
+    seen = []
+    for _ in range(30):
+        r = ctrl.solve(x)
+        u, code = C.step(xc)
+        assert np.abs(u - r.u).max() <= 1e-6
+        assert C.decode(code)["level"] == r.horizon
+        seen.append(r.horizon)
+        w = rng.uniform(-0.05, 0.05, 1)
+        x, xc = model.step(x, r.u, w), C.model(xc, u, w)
+    # the level decreases to 0 (T) and stays there
+    assert seen[0] == 2 and seen[-1] == 0 and all(np.diff(seen[:seen.index(0) + 1]) < 0)
+
+
+def test_polytopic_sequence_agrees(tmp_path):
+    """E10's model with polytopic sets: the C level look-up through the exported
+    H-representations and the successor test against polytopes."""
+    ex = cm.models.load("cannon_robust_wide")
+    seq = cm.controllable_sets(ex.model, ex.terminal, 0.05, robust=True, polytopic=True,
+                               law=ex.local_law, max_steps=2, progress=False)
+    ctrl = SetSequenceMPC(ex.model, seq, local_law=ex.local_law, solver="sqp", robust=True)
+    assert ctrl._polytopic
+    info = ctrl.export_c(tmp_path / "c")
+    assert info.tables["polytopes"] >= 2
+    C = load(info.directory)
+    rng = np.random.default_rng(8)
+    pts = rng.uniform(ex.model.X.lo, ex.model.X.hi, (400, 2))
+    lv = np.array([seq.level(p) for p in pts], dtype=object)
+    pts = np.vstack([pts[[v is not None for v in lv]][:150], pts[:40]])
+    levels = set()
+    for x in pts:
+        r = ctrl.solve(x)
+        u, code = C.step(x)
+        assert C.level(x) == (-1 if r.horizon is None else r.horizon)
+        if r.horizon is None:
+            assert code == -1
+            continue
+        levels.add(r.horizon)
+        assert C.decode(code)["level"] == r.horizon
+        assert np.abs(u - r.u).max() <= 1e-6, (x, r.u, u, hex(code))
+    assert {0, 1, 2} <= levels
+
+
+def contractive_models():
+    """A 3-state and a 4-state model with a non-zero equilibrium and two inputs."""
+    out = []
+    m3 = three_state_model()
+    out.append((m3, XE, UE))
+    xe4, ue4 = np.array([1.0, -0.5, 0.3, 0.0]), np.array([0.2, 0.4])
+    x = ca.SX.sym("x", 4)
+    u = ca.SX.sym("u", 2)
+    dx, du = x - ca.DM(xe4), u - ca.DM(ue4)
+    f = x + 0.1 * ca.vertcat(dx[1] + 0.1 * dx[2] ** 2, -0.3 * ca.sin(dx[0]) + du[0],
+                             dx[3] - 0.2 * dx[2], 0.2 * dx[0] * dx[1] - 0.1 * dx[3] + du[1])
+    m4 = cm.Model(x=x, u=u, f=f, X=cm.Box(xe4 - 2.0, xe4 + 2.0), U=cm.Box(ue4 - 3, ue4 + 3),
+                  name="four_state_export")
+    out.append((m4, xe4, ue4))
+    return out
+
+
+@pytest.mark.parametrize("k", [0, 1], ids=["3-state", "4-state"])
+def test_contractive_nonzero_reference_closed_loop_matches(k, tmp_path):
+    model, xe, ue = contractive_models()[k]
+    ctrl = cm.ContractiveMPC(model, horizon=6, alpha=0.9, x_ref=xe, u_ref=ue, solver="sqp",
+                             R=0.1 * np.eye(2))
+    info = ctrl.export_c(tmp_path / "c", x0=xe + 0.3)
+    C = load(info.directory)
+    rng = np.random.default_rng(k)
+    ws = rng.uniform(-0.05, 0.05, 40) if model.l else None
+    x = xc = xe + 0.3 * np.sign(rng.standard_normal(model.n))
+    ctrl.reset()
+    compared = 0
+    for i in range(40):
+        r = ctrl.solve(x)
+        u, code = C.step(xc)
+        if "search_time" in r.stats:  # a set inversion (Python only): stop comparing
+            break
+        assert np.abs(u - r.u).max() <= 1e-6, (i, x, r.u, u, hex(code))
+        compared += 1
+        w = None if ws is None else ws[i:i + 1]
+        x, xc = model.step(x, r.u, w), C.model(xc, u, w)
+    assert compared >= 20
+    assert np.linalg.norm(x - xe) < 0.5 * np.linalg.norm(0.3 * np.ones(model.n))
+
+
+def test_ipopt_variant_builds_and_agrees(tri, tmp_path):
+    """solver='ipopt': the generated C calls the IPOPT library shipped in the casadi wheel
+    (include and link flags from the installed casadi); it agrees with the Python
+    controller that uses IPOPT."""
+    model, seq, _, _ = tri
+    ctrl = SetSequenceMPC(model, seq, Q=np.eye(3), R=0.1 * np.eye(2), x_ref=XE,
+                          local_law=tri[2]._law(model.x), solver="ipopt", robust=True)
+    info = ctrl.export_c(tmp_path / "c", solver="ipopt")
+    mk = (info.directory / "Makefile").read_text()
+    assert "-lipopt" in mk and "-I" in mk
+    C = load(info.directory)
+    rng = np.random.default_rng(9)
+    n = 0
+    for x in sample_levels(seq, rng, 60):
+        r = ctrl.solve(x)
+        u, code = C.step(x)
+        assert C.decode(code)["level"] == r.horizon
+        if r.horizon:
+            n += 1
+            assert np.abs(u - r.u).max() <= 1e-6, (x, r.u, u, hex(code))
+    assert n >= 40
+
+
+def test_a_robust_controller_of_a_model_not_affine_in_w_is_refused(tri, tmp_path):
+    """The C check evaluates the vertices of W: for a model not affine in w they do not
+    bound the image (here the worst w is inside W), so the export is refused whichever
+    minimax the controller uses."""
+    from casadi_cmpc.codegen.export import ExportError
+
+    model = three_state_model(affine_w=False)
+    assert not model.is_affine_in_w
+    seq = tri[1]
+    for mm in ("vertices", "interval"):
+        ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
+                              solver="sqp", robust=True, minimax=mm)
+        with pytest.raises(ExportError, match="affine in w|minimax"):
+            ctrl.export_c(tmp_path / mm)
+        assert not (tmp_path / mm).exists()
+    # the nominal controller of the same model checks one w: it is exported
+    ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
+                          solver="sqp", robust=False)
+    assert ctrl.export_c(tmp_path / "nominal").kind == "set_sequence"
