@@ -232,3 +232,32 @@ def test_a_robust_controller_of_a_model_not_affine_in_w_is_refused(tri, tmp_path
     ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
                           solver="sqp", robust=False)
     assert ctrl.export_c(tmp_path / "nominal").kind == "set_sequence"
+
+
+def test_the_solver_answer_is_the_minimax_point(tri):
+    """Where the applied control is the solver's, it minimises the worst vertex cost over U:
+    no grid point of U does better. (A start whose multipliers do not match the active
+    rows lets sqpmethod stop at once at the minimiser of the mean cost.)"""
+    model, seq, ctrl, _ = tri
+    rng = np.random.default_rng(12)
+    g = np.linspace(-1.0, 1.0, 161)
+    G = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2) + UE
+    wv = np.asarray(model.W.vertices())
+    F = model.function.map(G.shape[0])
+
+    def worst(x, U):
+        c = [np.einsum("ij,ij->j", (d := np.asarray(F(np.repeat(x[:, None], len(U), 1), U.T,
+                                                          np.repeat(w[:, None], len(U), 1)))
+                                     - XE[:, None]), d) + 0.1 * (U ** 2).sum(1)
+             for w in wv]
+        return np.max(c, axis=0)
+
+    n = 0
+    for x in sample_levels(seq, rng, 120):
+        r = ctrl.solve(x)
+        if not r.horizon or r.certificate.details.get("source") != "solver":
+            continue
+        n += 1
+        best = worst(x, G).min()
+        assert worst(x, r.u[None])[0] <= best + 1e-9, (x, r.u)
+    assert n >= 20
