@@ -347,6 +347,7 @@ _CONTRACTIVE = r"""
 
 WORK(cmpc_solver)
 WORK(cmpc_check)
+WORK(cmpc_pred)
 #if CMPC_HAS_LAW
 WORK(cmpc_law)
 #endif
@@ -416,6 +417,12 @@ int cmpc_step(const double *x, double *u) {
             z0[k * NU + i] = have_warm
                 ? warm[(k + 1 < CMPC_N ? k + 1 : CMPC_N - 1) * NU + i]
                 : clip(cmpc_u_ref[i], cmpc_u_lo[i], cmpc_u_hi[i]);
+    if (CMPC_NZX > 0) { /* multiple shooting: the states predicted from that sequence */
+        cmpc_pred_arg[0] = z0;
+        cmpc_pred_arg[1] = x;
+        cmpc_pred_res[0] = z0 + NN + CMPC_NT;
+        cmpc_pred(cmpc_pred_arg, cmpc_pred_res, cmpc_pred_iw, cmpc_pred_w, 0);
+    }
     for (i = 0; i < NX; ++i) p[i] = x[i];
     p[NX] = 1.0 / r0;
     cmpc_solver_arg[0] = z0; cmpc_solver_arg[1] = p;

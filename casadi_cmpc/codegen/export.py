@@ -497,6 +497,9 @@ class _ContractiveExport:
         chk = ca.Function("cmpc_check", [fl["us"], fl["x0"]],
                           [ca.vertcat(fl["common"], fl["c_val"])], ["u", "x0"], ["rows"])
         funs.append(chk)
+        # the states predicted from the warm-started sequence (multiple shooting's start)
+        funs.append(ca.Function("cmpc_pred", [fl["us"], fl["x0"]],
+                                [ca.vec(ca.horzcat(*fl["xs"][1:]))], ["u", "x0"], ["x"]))
         self.check_lo = np.concatenate([fl["c_lo"], [-np.inf]])
         self.check_hi = np.concatenate([fl["c_hi"], [0.0]])
         if ctrl._law is not None:
@@ -510,6 +513,8 @@ class _ContractiveExport:
                "#ifndef CMPC_TABLES_H", "#define CMPC_TABLES_H", ""]
         out.append(f"#define CMPC_N {self.N}")
         out.append(f"#define CMPC_NZ {h.n_z}")
+        out.append(f"#define CMPC_NT {h.n_t}")
+        out.append(f"#define CMPC_NZX {h.n_zx}")
         out.append(f"#define CMPC_NG {h.lbg.size}")
         out.append(f"#define CMPC_NCHECK {self.check_lo.size}")
         out.append(f"#define CMPC_HAS_LAW {0 if self.S is None else 1}")

@@ -165,11 +165,12 @@ def contractive_models():
     return out
 
 
-@pytest.mark.parametrize("k", [0, 1], ids=["3-state", "4-state"])
-def test_contractive_nonzero_reference_closed_loop_matches(k, tmp_path):
+@pytest.mark.parametrize("k, shooting", [(0, "multiple"), (0, "single"), (1, "multiple")],
+                         ids=["3-state", "3-state-single-shooting", "4-state"])
+def test_contractive_nonzero_reference_closed_loop_matches(k, shooting, tmp_path):
     model, xe, ue = contractive_models()[k]
     ctrl = cm.ContractiveMPC(model, horizon=6, alpha=0.9, x_ref=xe, u_ref=ue, solver="sqp",
-                             R=0.1 * np.eye(2))
+                             R=0.1 * np.eye(2), shooting=shooting)
     info = ctrl.export_c(tmp_path / "c", x0=xe + 0.3)
     C = load(info.directory)
     rng = np.random.default_rng(k)

@@ -270,6 +270,7 @@ def test_reference_that_is_not_an_equilibrium_is_refused(cannon):
     ({"solver": "snopt"}, ValueError, "solver"),
     ({"mode": "batch"}, ValueError, "mode"),
     ({"contract": np.ones((1, 3))}, DimensionError, "contract"),
+    ({"shooting": "direct"}, ValueError, "shooting"),
 ])
 def test_bad_arguments_are_refused(cannon, kw, err, match):
     args = {"horizon": 3, "alpha": 0.9}
@@ -470,3 +471,21 @@ def test_constants_casadi_creates_while_composing_are_widened():
               if h.check_fun.instruction_id(k) == ca.OP_CONST]
     assert not consts  # every constant is an input: thin (exact) or widened (created)
     assert h.n_created >= 1 and (h.param_lo <= h.param_hi).all()
+
+
+@pytest.mark.parametrize("norm", [2, np.inf, 1])
+def test_single_and_multiple_shooting_give_the_same_closed_loop(cannon, norm):
+    """The two NLP forms have the same solutions: the verified closed loops from the same
+    state agree (to the solver's tolerance), for each contraction norm."""
+    loops = []
+    for shooting in ("single", "multiple"):
+        ctrl = ContractiveMPC(cannon, horizon=6, alpha=0.9, norm=norm, solver="sqp",
+                              shooting=shooting)
+        x, us = np.array([1.2, -0.9]), []
+        for _ in range(12):
+            r = ctrl.solve(x)
+            assert r.certificate.label == "verified"
+            us.append(r.u[0])
+            x = cannon.step(x, r.u)
+        loops.append(np.array(us))
+    assert np.abs(loops[0] - loops[1]).max() <= 1e-5
