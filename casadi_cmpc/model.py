@@ -15,7 +15,7 @@ from .exceptions import (
     ModelError,
     UnboundedSetError,
 )
-from .interval._derivative import JacobianInclusion
+from .interval._derivative import JacobianInclusion, ParamGraph
 from .interval.compiler import InclusionFunction, inclusion
 from .sets.box import Box
 
@@ -339,6 +339,24 @@ class Model:
         sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
         return self._cached(("jac_sx", wrt), lambda: ca.jacobian(self.f, sym))
 
+    def _jump_inputs(self) -> tuple[bool, bool, bool, tuple[int, ...]]:
+        """Whether an operation of f that may jump or has a pole (floor, sign, comparisons,
+        if_else, fmod, 1/x, ...) has its argument depending on x, u, w, and the states it
+        depends on. CasADi differentiates such operations piecewise (a jump has derivative
+        0), so a constant Jacobian does not make f affine when one of them depends on the
+        variable: the structure tests below treat those variables as entering
+        nonlinearly."""
+        def build() -> tuple[bool, bool, bool, tuple[int, ...]]:
+            pg = ParamGraph(self.function)
+            g = ca.vertcat(*[pg.guard_exprs]) if pg.guards else ca.SX(0, 1)
+            if g.numel() == 0:
+                return False, False, False, ()
+            zx, zu, zw = pg.inputs
+            dep = [z.numel() > 0 and ca.depends_on(g, z) for z in (zx, zu, zw)]
+            states = tuple(j for j in range(self.n) if ca.depends_on(g, zx[j]))
+            return dep[0], dep[1], dep[2], states
+        return self._cached("jump_inputs", build)
+
     def _all_syms(self) -> list[ca.SX]:
         return [self.x, self.u] + ([self.w] if self.w is not None else [])
 
@@ -347,24 +365,32 @@ class Model:
 
     @property
     def is_affine_in_u(self) -> bool:
-        """True when f is affine in u (df/du does not depend on u)."""
-        return self.m == 0 or not ca.depends_on(self._jac("u"), self.u)
+        """True when f is affine in u: df/du does not depend on u, and no operation that
+        may jump (if_else, comparisons, floor, sign, ...) depends on u."""
+        return self.m == 0 or not (ca.depends_on(self._jac("u"), self.u)
+                                   or self._jump_inputs()[1])
 
     @property
     def is_affine_in_w(self) -> bool:
-        """True when f is affine in w (df/dw does not depend on w); True without w."""
-        return self.w is None or not ca.depends_on(self._jac("w"), self.w)
+        """True when f is affine in w: df/dw does not depend on w, and no operation that
+        may jump (if_else, comparisons, floor, sign, ...) depends on w; True without w.
+        Only then do the vertices of W bound the image ``f(x, u, W)``."""
+        return self.w is None or not (ca.depends_on(self._jac("w"), self.w)
+                                      or self._jump_inputs()[2])
 
     @property
     def is_additive_in_w(self) -> bool:
         """True when w enters additively, f = g(x, u) + E w with a constant E; True without w."""
-        return self.w is None or not self._depends(self._jac("w"), self._all_syms())
+        return self.w is None or not (self._depends(self._jac("w"), self._all_syms())
+                                      or self._jump_inputs()[2])
 
     @property
     def is_linear(self) -> bool:
-        """True when f is affine in (x, u, w) jointly (all Jacobians constant)."""
-        return not any(self._depends(self._jac(k), self._all_syms())
-                       for k in ("x", "u", "w") if k != "w" or self.w is not None)
+        """True when f is affine in (x, u, w) jointly: all Jacobians constant and no
+        operation that may jump (if_else, comparisons, floor, sign, ...) in f."""
+        return not (any(self._depends(self._jac(k), self._all_syms())
+                        for k in ("x", "u", "w") if k != "w" or self.w is not None)
+                    or any(self._jump_inputs()[:3]))
 
     @property
     def nonlinear_states(self) -> tuple[int, ...]:
@@ -375,7 +401,8 @@ class Model:
         """
         J = self._jac("x")
         syms = self._all_syms()
-        return tuple(j for j in range(self.n) if self._depends(J[:, j], syms))
+        jump = self._jump_inputs()[3]
+        return tuple(j for j in range(self.n) if self._depends(J[:, j], syms) or j in jump)
 
     @property
     def linear_states(self) -> tuple[int, ...]:

@@ -569,3 +569,34 @@ def test_equilibrium_solves_f_x_u_equals_x():
     assert np.abs(model.step(xe, [0.3]) - xe).max() <= 1e-12
     with pytest.raises(cm.ModelError, match="no equilibrium"):
         model.equilibrium([1.5], x0=[0.2, 0.0, 0.0])  # sin(x0) = 1.5 has no solution
+
+
+JUMP_OPS = {
+    "if_else": lambda a: ca.if_else(a > 0.3, 0.05, 0.0),
+    "floor": lambda a: 0.01 * ca.floor(10 * a),
+    "sign": lambda a: 0.02 * ca.sign(a - 0.2),
+    "fmod": lambda a: ca.fmod(a, 0.37),
+    "less_than": lambda a: 0.03 * (a < 0.1),
+    "fmax_step": lambda a: 0.04 * ca.ceil(a),
+}
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(op=st.sampled_from(sorted(JUMP_OPS)), var=st.sampled_from(["x0", "x1", "u", "w"]),
+       gain=st.floats(0.1, 3.0), row=st.integers(0, 1))
+def test_a_jump_makes_its_variable_enter_nonlinearly(op, var, gain, row):
+    """CasADi differentiates a jump as 0, so a constant Jacobian alone would call
+    x+ = A x + B u + E w + c * floor(w) affine in w (and linear), and the vertices of W would
+    be taken to bound its image. Whatever the jump and the variable it acts on, the
+    structure tests must say that this variable enters nonlinearly."""
+    x, u, w = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("w")
+    a = {"x0": x[0], "x1": x[1], "u": u, "w": w}[var] * gain
+    f = ca.vertcat(x[0] + 0.1 * x[1] + 0.2 * w, x[1] + 0.1 * u)
+    f[row] = f[row] + JUMP_OPS[op](a)
+    M = cm.Model(x=x, u=u, w=w, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]),
+                 W=cm.Box([-1], [1]))
+    assert not M.is_linear
+    assert M.is_affine_in_w == (var != "w")
+    assert M.is_additive_in_w == (var != "w")
+    assert M.is_affine_in_u == (var != "u")
+    assert M.nonlinear_states == ((int(var[1]),) if var.startswith("x") else ())

@@ -37,6 +37,21 @@ static int all_finite(const double *v, int k) {
     return 1;
 }
 
+/* a.x <= b for one row a (NX entries), decided from a compensated dot product (Ogita, Rump
+ * and Oishi's Dot2 with error-free products through fma): the sum a.x - b is evaluated as in
+ * twice the working precision, so a point of a facet and a point 1e-16 outside it are told
+ * apart, whatever the rounding of a plain sum would say. */
+static int row_le(const double *a, double b, const double *x) {
+    double p = -b, s = 0.0;
+    int i;
+    for (i = 0; i < NX; ++i) {
+        double h = a[i] * x[i], r = fma(a[i], x[i], -h), t = p + h, z = t - p;
+        s += ((p - (t - z)) + (h - z)) + r;
+        p = t;
+    }
+    return p + s <= 0.0;
+}
+
 static int solver_mem = -1;
 
 #ifdef CMPC_PROFILE
@@ -109,10 +124,11 @@ static int grid_level(const double *x, long *row) {
     for (d = 0; d < NX; ++d) {
         const double *e = cmpc_edges + cmpc_edge_off[d];
         int E = cmpc_n_edges[d], i, hi_i, lo_i;
+        int top = E > 1 ? E - 2 : 0; /* last cell (one cell if all boxes are flat here) */
         if (!(x[d] >= e[0] && x[d] <= e[E - 1])) return -1;
         i = last_le(e, E, x[d]);
-        hi_i = clampi(i, 0, E - 2);
-        lo_i = (i >= 0 && e[clampi(i, 0, E - 1)] == x[d]) ? clampi(i - 1, 0, E - 2) : hi_i;
+        hi_i = clampi(i, 0, top);
+        lo_i = (i >= 0 && e[clampi(i, 0, E - 1)] == x[d]) ? clampi(i - 1, 0, top) : hi_i;
         cand[d][0] = lo_i;
         cand[d][1] = hi_i;
     }
@@ -130,12 +146,9 @@ static int grid_level(const double *x, long *row) {
 }
 
 static int in_poly(const double *A, const double *b, int rows, const double *x) {
-    int k, i;
-    for (k = 0; k < rows; ++k) {
-        double s = 0.0;
-        for (i = 0; i < NX; ++i) s += A[k * NX + i] * x[i];
-        if (!(s <= b[k])) return 0;
-    }
+    int k;
+    for (k = 0; k < rows; ++k)
+        if (!row_le(A + k * NX, b[k], x)) return 0;
     return 1;
 }
 
@@ -191,10 +204,10 @@ static int box_covered(const double *lo, const double *hi, int j) {
     int d, a[NX], b[NX], c[NX];
     for (d = 0; d < NX; ++d) {
         const double *e = cmpc_edges + cmpc_edge_off[d];
-        int E = cmpc_n_edges[d];
+        int E = cmpc_n_edges[d], top = E > 1 ? E - 2 : 0;
         if (!(lo[d] >= e[0] && hi[d] <= e[E - 1] && lo[d] < hi[d])) return 0;
-        a[d] = clampi(last_le(e, E, lo[d]), 0, E - 2);
-        b[d] = clampi(last_lt(e, E, hi[d]), 0, E - 2);
+        a[d] = clampi(last_le(e, E, lo[d]), 0, top);
+        b[d] = clampi(last_lt(e, E, hi[d]), 0, top);
         c[d] = a[d];
     }
     for (;;) {
@@ -363,13 +376,10 @@ void cmpc_reset(void) {
 }
 
 static int in_local_set(const double *x) {
-    int k, i;
+    int k;
     if (!CMPC_HAS_LAW) return 0;
-    for (k = 0; k < CMPC_S_ROWS; ++k) {
-        double s = 0.0;
-        for (i = 0; i < NX; ++i) s += cmpc_S_A[k * NX + i] * x[i];
-        if (!(s <= cmpc_S_b[k])) return 0;
-    }
+    for (k = 0; k < CMPC_S_ROWS; ++k)
+        if (!row_le(cmpc_S_A + k * NX, cmpc_S_b[k], x)) return 0;
     return 1;
 }
 
@@ -504,7 +514,8 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
  *       flags above them say how u was obtained (see below). Negative codes: no control
  *       (u is NaN): CMPC_NOT_CONTROLLABLE (x in no set), CMPC_BAD_INPUT (x not finite),
  *       CMPC_INTERNAL_ERROR (solver memory).
- *   int cmpc_level(const double *x);   the level look-up alone (-1: in no set)
+ *   int cmpc_level(const double *x);   the level look-up alone (CMPC_NOT_CONTROLLABLE:
+ *                                      in no set; CMPC_BAD_INPUT: x not finite)
  *   void cmpc_reset(void);             forget warm starts
  *   void cmpc_model(const double *x, const double *u, const double *w, double *x_next);
  *                                      the model f(x, u, w) (for simulation)

@@ -615,8 +615,8 @@ class CompiledController:
         return self.step(x)[0]
 
     def level(self, x: Any) -> int:
-        """``cmpc_level``: the level of x (-1: in no set); for a contractive MPC, 0 inside
-        the local set and 1 elsewhere."""
+        """``cmpc_level``: the level of x (-1: in no set, -2: x not finite); for a
+        contractive MPC, 0 inside the local set and 1 elsewhere."""
         xv = np.asarray(x, dtype=float).reshape(self.n)
         for i in range(self.n):
             self._x[i] = xv[i]

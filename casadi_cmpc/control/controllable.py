@@ -660,6 +660,10 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                     polys = [Q for Q in polys if not Q.is_subset(P)] + [P]
                 members = [T] + polys
                 K = SetUnion(members, dim=model.n)
+            elif polytopic:
+                # no new box: K_i = K_{i-1}, held by the same polytopes (a box union here
+                # would turn a converged polytopic sequence into a box sequence)
+                K = seq.sets[-1]
             else:
                 K = SetUnion([T, Paving(inner=inner, domain=D)], dim=model.n)
             step["seconds"] = time.perf_counter() - ts

@@ -190,3 +190,30 @@ def test_an_operation_the_generator_cannot_emit_is_refused(tmp_path):
     F = ca.Function("F", [x], [_Sq()(x) + x])
     with pytest.raises(ExportError, match="cannot generate C for 'F'"):
         _generate(tmp_path, [F])
+
+
+@needs_cc
+def test_terminal_membership_in_c_is_exact_on_facets(e9):
+    """Points on the facets of T and one or two ulps off them: the C look-up says level 0
+    exactly when the point lies in T in exact rational arithmetic (a plain floating-point
+    sum, or numpy's, can put a point 1e-16 outside T inside it)."""
+    from fractions import Fraction
+
+    ex, seq, ctrl, info = e9
+    C = load(info.directory)
+    A, b = ex.terminal.A, ex.terminal.b
+    rng = np.random.default_rng(21)
+    bb = ex.terminal.bounding_box()
+    n_in = n_out = 0
+    for _ in range(400):
+        k = rng.integers(len(b))
+        x = rng.uniform(bb.lo, bb.hi)
+        x = x - (A[k] @ x - b[k]) / (A[k] @ A[k]) * A[k]  # onto facet k (rounded)
+        for _ in range(rng.integers(0, 3)):
+            x = np.nextafter(x, x + rng.choice([-1.0, 1.0], 2))
+        inside = all(sum(Fraction(a) * Fraction(v) for a, v in zip(A[r], x, strict=True))
+                     <= Fraction(b[r]) for r in range(len(b)))
+        assert (C.level(x) == 0) == inside, x
+        n_in += inside
+        n_out += not inside
+    assert n_in > 50 and n_out > 50

@@ -27,15 +27,18 @@ UE = np.array([0.1, -0.2])
 A3 = np.array([[0.2, 1.0, 0.0], [0.0, 0.1, 1.0], [0.3, 0.0, -0.4]])
 
 
-def three_state_model(affine_w: bool = True) -> cm.Model:
+def three_state_model(w_form: str = "affine") -> cm.Model:
     """x+ = x + 0.1 (A dx + g(dx) + B(dx) du + e w), dx = x - x_e, du = u - u_e: a
-    nonlinear model with its equilibrium at (x_e, u_e) != 0, affine in w (else the
-    disturbance enters as w + 20 w^2, whose range over W is not spanned by its vertices)."""
+    nonlinear model with its equilibrium at (x_e, u_e) != 0, affine in w. Other forms of
+    the disturbance, whose range over W is not spanned by its vertices: ``"square"``
+    (w + 20 w^2) and ``"jump"`` (w plus a step of 0.05 inside W, zero at both vertices)."""
     x = ca.SX.sym("x", 3)
     u = ca.SX.sym("u", 2)
     w = ca.SX.sym("w")
-    if not affine_w:
+    if w_form == "square":
         w = w + 20 * w ** 2
+    elif w_form == "jump":
+        w = w + ca.if_else(ca.fabs(w) < 0.04, 0.05, 0.0)
     dx, du = x - ca.DM(XE), u - ca.DM(UE)
     g = ca.vertcat(0.3 * dx[1] ** 2, -0.2 * ca.sin(dx[0]) * dx[2], 0.1 * dx[0] * dx[1])
     B = ca.vertcat(ca.horzcat(1 + 0.2 * ca.cos(dx[1]), 0), ca.horzcat(0.1 * dx[0], 1),
@@ -219,16 +222,24 @@ def test_a_robust_controller_of_a_model_not_affine_in_w_is_refused(tri, tmp_path
     bound the image (here the worst w is inside W), so the export is refused whichever
     minimax the controller uses."""
     from casadi_cmpc.codegen.export import ExportError
+    from casadi_cmpc.exceptions import UnsupportedOperationError
 
-    model = three_state_model(affine_w=False)
-    assert not model.is_affine_in_w
     seq = tri[1]
-    for mm in ("vertices", "interval"):
-        ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
-                              solver="sqp", robust=True, minimax=mm)
-        with pytest.raises(ExportError, match="affine in w|minimax"):
-            ctrl.export_c(tmp_path / mm)
-        assert not (tmp_path / mm).exists()
+    for form in ("square", "jump"):
+        model = three_state_model(form)
+        assert not model.is_affine_in_w
+        for mm in ("vertices", "interval"):
+            if form == "jump" and mm == "interval":  # the minimax needs continuity
+                with pytest.raises(UnsupportedOperationError, match="jump"):
+                    SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
+                                   solver="sqp", robust=True, minimax=mm)
+                continue
+            ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
+                                  solver="sqp", robust=True, minimax=mm)
+            with pytest.raises(ExportError, match="affine in w|minimax"):
+                ctrl.export_c(tmp_path / (form + mm))
+            assert not (tmp_path / (form + mm)).exists()
+    model = three_state_model("square")
     # the nominal controller of the same model checks one w: it is exported
     ctrl = SetSequenceMPC(model, seq, x_ref=XE, local_law=tri[2]._law(model.x),
                           solver="sqp", robust=False)
@@ -262,3 +273,36 @@ def test_the_solver_answer_is_the_minimax_point(tri):
         best = worst(x, G).min()
         assert worst(x, r.u[None])[0] <= best + 1e-9, (x, r.u)
     assert n >= 20
+
+
+def test_converged_polytopic_sequence_keeps_its_polytopes(tri, tmp_path):
+    """A polytopic sequence that converges (its last step proves no new box) has
+    K_last = K_{last-1}, still held by polytopes: the controller and its C export use the
+    polytopes, and C and Python agree on the levels of 3-state points."""
+    model, _, ctrl0, _ = tri
+    T = cm.Polytope.from_box(cm.Box(XE - 0.15, XE + 0.15))
+    law = ctrl0._law(model.x)
+    seq = cm.controllable_sets(model, T, 0.1, robust=True, polytopic=True, law=law,
+                               assume_invariant=True, max_steps=6, progress=False)
+    assert seq.status == "converged"
+    assert seq.sets[-1] is seq.sets[-2]
+    ctrl = SetSequenceMPC(model, seq, Q=np.eye(3), R=0.1 * np.eye(2), x_ref=XE,
+                          local_law=law, solver="sqp", robust=True)
+    assert ctrl._polytopic
+    info = ctrl.export_c(tmp_path / "c")
+    assert info.tables["polytopes"] >= 1
+    C = load(info.directory)
+    rng = np.random.default_rng(4)
+    pts = np.vstack([rng.uniform(model.X.lo, model.X.hi, (200, 3)),
+                     sample_levels(seq, rng, 400)])
+    n = 0
+    for x in pts:
+        lv = seq.level(x)
+        assert C.level(x) == (-1 if lv is None else lv), x
+        if lv:
+            r = ctrl.solve(x)
+            u, code = C.step(x)
+            assert C.decode(code)["level"] == r.horizon == lv
+            assert np.abs(u - r.u).max() <= 1e-6, (x, r.u, u, hex(code))
+            n += 1
+    assert n >= 50
