@@ -35,12 +35,11 @@ import casadi_cmpc as cm
 from casadi_cmpc.codegen import export_c, load
 from casadi_cmpc.mpc.sequence import SetSequenceMPC
 
-HARNESS = r"""
+# clock and sort of the C timing programs
+_C_TIMING = r"""
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
-#include "cmpc_controller.h"
-extern double cmpc_profile_solver_seconds;
 static double now(void) {
     struct timespec t;
     clock_gettime(CLOCK_MONOTONIC, &t);
@@ -50,6 +49,11 @@ static int cmp(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
 }
+"""
+
+HARNESS = _C_TIMING + r"""
+#include "cmpc_controller.h"
+extern double cmpc_profile_solver_seconds;
 int main(int argc, char **argv) {
     FILE *f;
     int N, i, k, r, reps = argc > 2 ? atoi(argv[2]) : 5;
@@ -102,20 +106,8 @@ def _c_times(directory: Path, states: np.ndarray) -> dict:
             "c_level_us": round(lvl, 4), "c_solver_us": round(solver, 3)}
 
 
-ANCHOR = r"""
-#include <stdio.h>
-#include <stdlib.h>
-#include <time.h>
+ANCHOR = _C_TIMING + r"""
 #include "anchor.h"
-static double now(void) {
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-static int cmp(const void *a, const void *b) {
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 int main(int argc, char **argv) {
     FILE *f;
     int N, i, k, r, reps = 5, mem;
