@@ -14,6 +14,7 @@ from .exceptions import (
     FreeSymbolError,
     ModelError,
     UnboundedSetError,
+    UnsupportedOperationError,
 )
 from .interval._derivative import JacobianInclusion, ParamGraph
 from .interval.compiler import InclusionFunction, inclusion
@@ -347,7 +348,10 @@ class Model:
         variable: the structure tests below treat those variables as entering
         nonlinearly."""
         def build() -> tuple[bool, bool, bool, tuple[int, ...]]:
-            pg = ParamGraph(self.function)
+            try:
+                pg = ParamGraph(self.function)
+            except UnsupportedOperationError:  # f calls a Function: assume the worst
+                return self.n > 0, self.m > 0, self.l > 0, tuple(range(self.n))
             g = ca.vertcat(*[pg.guard_exprs]) if pg.guards else ca.SX(0, 1)
             if g.numel() == 0:
                 return False, False, False, ()

@@ -600,3 +600,16 @@ def test_a_jump_makes_its_variable_enter_nonlinearly(op, var, gain, row):
     assert M.is_additive_in_w == (var != "w")
     assert M.is_affine_in_u == (var != "u")
     assert M.nonlinear_states == ((int(var[1]),) if var.startswith("x") else ())
+
+
+def test_a_call_kept_by_never_inline_is_taken_as_nonlinear():
+    """The structure tests cannot look inside a call that CasADi keeps (never_inline): they
+    take every variable as entering nonlinearly (the safe side) instead of failing."""
+    t = ca.SX.sym("t")
+    G = ca.Function("G", [t], [2 * t], {"never_inline": True})
+    x, u, w = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("w")
+    M = cm.Model(x=x, u=u, w=w, f=ca.vertcat(x[0] + G(x[1]), x[1] + u + w),
+                 X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]), W=cm.Box([-1], [1]))
+    assert not M.is_linear and not M.is_affine_in_u and not M.is_affine_in_w
+    assert M.nonlinear_states == (0, 1)
+    assert "linear: False" in M.summary()

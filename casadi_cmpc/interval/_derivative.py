@@ -119,6 +119,12 @@ class ParamGraph:
                 nz_out[outs[0]][outs[1]] = work[ins[0]]
                 self.masks[outs[0]][outs[1]] = mask[ins[0]]
                 continue
+            if op == ca.OP_CALL:
+                from ..exceptions import UnsupportedOperationError
+
+                raise UnsupportedOperationError(
+                    f"'{self.name}' calls another Function (a call kept by never_inline): "
+                    "write f in SX operations (inline the call) to analyse it")
             unary = op in _UNARY_OPS
             args = [work[ins[0]]] if unary else [work[ins[0]], work[ins[1]]]
             m = mask[ins[0]] if unary else mask[ins[0]] | mask[ins[1]]

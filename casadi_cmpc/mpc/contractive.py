@@ -537,7 +537,10 @@ class ContractiveMPC:
         warm-started sequence; the KKT systems are sparse and banded, which about halves the
         time of ``sqpmethod`` at N = 10. ``"single"``: the model is composed with itself and
         only the controls are variables. Either way the returned sequence is re-checked by
-        intervals from x alone (the states the solver returns are not used).
+        intervals from x alone and its cost is evaluated from x (the states the solver
+        returns are not used). On convex problems both forms have the same solution; on
+        nonconvex ones (path constraints, obstacles) the local solver may end at
+        different local optima in the two forms.
 
     Examples
     --------
@@ -899,7 +902,9 @@ class ContractiveMPC:
         self._lam[N] = (sol["lam_x"], sol["lam_g"])
         raw = z[:N * m].reshape(N, m)
         u = np.clip(raw, self.model.U.lo, self.model.U.hi)
-        if np.array_equal(u, raw):
+        if np.array_equal(u, raw) and not h.n_zx:
+            # the NLP's cost is the sequence's only when the states are the composed
+            # prediction (with multiple shooting they are the solver's, defects open)
             stats["_cost"] = float(sol["f"])
         return u, stats
 

@@ -360,9 +360,11 @@ class SetSequenceMPC:
     def _initial(self, x: np.ndarray, ug: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The solver's start ``(z_0, lam_g0)``: ``u_0`` from :meth:`_start_function`, the
         epigraph variable at the largest vertex cost and multiplier 1 on that row, 0
-        elsewhere. Such a start satisfies complementarity, so ``sqpmethod`` (whose
-        convergence test does not check it) cannot stop at a point that merely minimises
-        the mean cost. The exported C does the same."""
+        elsewhere. Such a start satisfies complementarity: ``sqpmethod``, whose
+        convergence test does not check it, would otherwise stop at once where the mean
+        cost is stationary. Its tolerances are absolute, so on a badly scaled problem
+        (gradients near ``tol_du``) it may still stop early: the answer is a candidate,
+        certified or replaced like any other. The exported C does the same."""
         u0, c = self._start(x, ug)
         u0 = np.asarray(u0, dtype=float).reshape(-1)
         c = np.asarray(c, dtype=float).reshape(-1)
