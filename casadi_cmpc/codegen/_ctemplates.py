@@ -84,7 +84,7 @@ static int solver_ready(void) {
 
 _SEQUENCE = r"""
 #define NZ (NU + 1)
-#define NP (NX + CMPC_R * NX + CMPC_R)
+#define NP (NX + CMPC_R * NX + CMPC_R + 1)
 #define NG (CMPC_NV * (1 + CMPC_R))
 
 WORK(cmpc_law)
@@ -262,22 +262,26 @@ static int successor_in(const double *x, const double *u, int j) {
 
 /* ---------------------------------------------------------------- the step */
 /* The solver's start (as SetSequenceMPC._initial): u0 from the generated cmpc_start (one
- * Newton step on the mean vertex cost from the guess), the epigraph variable at the first
- * largest finite vertex cost and multiplier 1 on that row. */
-static void solver_start(const double *x, const double *guess, double *z0, double *lam) {
-    double c[CMPC_NV];
+ * Newton step on the mean vertex cost from the guess) as the scaled v0 = (u0 - mid) / half,
+ * the epigraph variable at the first largest finite vertex cost c_k and multiplier 1 on
+ * that row; the cost scale cs = 1 / c_k (1 when c_k is 0 or not finite) is returned. */
+static double solver_start(const double *x, const double *guess, double *z0, double *lam) {
+    double c[CMPC_NV], u0[NU], cs;
     int v, k = 0;
     double best = -INFINITY;
     cmpc_start_arg[0] = x;
     cmpc_start_arg[1] = guess;
-    cmpc_start_res[0] = z0;
+    cmpc_start_res[0] = u0;
     cmpc_start_res[1] = c;
     cmpc_start(cmpc_start_arg, cmpc_start_res, cmpc_start_iw, cmpc_start_w, 0);
     for (v = 0; v < CMPC_NV; ++v)
         if (isfinite(c[v]) && c[v] > best) { best = c[v]; k = v; }
-    z0[NU] = c[k];
+    cs = isfinite(c[k]) && c[k] > 0 ? 1.0 / c[k] : 1.0;
+    for (v = 0; v < NU; ++v) z0[v] = (u0[v] - cmpc_u_mid[v]) / cmpc_u_half[v];
+    z0[NU] = cs * c[k];
     for (v = 0; v < NG; ++v) lam[v] = 0.0;
     lam[k * (1 + CMPC_R)] = 1.0;
+    return cs;
 }
 
 void cmpc_reset(void) { /* the one-step controller keeps nothing between calls */ }
@@ -304,11 +308,11 @@ int cmpc_step(const double *x, double *u) {
     if (!solver_ready()) return CMPC_INTERNAL_ERROR;
     if (wl >= 1 && wr >= 0) uw = cmpc_witness + wr * NU;
     /* one-step problem into K_{lvl-1}, started from the stored control (see solver_start) */
-    solver_start(x, uw ? uw : cmpc_u_mid, z0, lam_g0);
+    p[NP - 1] = solver_start(x, uw ? uw : cmpc_u_mid, z0, lam_g0);
     for (i = 0; i < NX; ++i) p[i] = x[i];
     for (i = 0; i < CMPC_R * NX; ++i) p[NX + i] = cmpc_nlp_H[(lvl - 1) * CMPC_R * NX + i];
     for (i = 0; i < CMPC_R; ++i) p[NX + CMPC_R * NX + i] = cmpc_nlp_h[(lvl - 1) * CMPC_R + i];
-    for (i = 0; i < NU; ++i) { lbx[i] = cmpc_u_lo[i]; ubx[i] = cmpc_u_hi[i]; }
+    for (i = 0; i < NU; ++i) { lbx[i] = cmpc_v_lo[i]; ubx[i] = cmpc_v_hi[i]; }
     lbx[NU] = -INFINITY;
     ubx[NU] = INFINITY;
     for (i = 0; i < NG; ++i) { lbg[i] = -INFINITY; ubg[i] = 0.0; }
@@ -323,8 +327,13 @@ int cmpc_step(const double *x, double *u) {
     flag = cmpc_solver(cmpc_solver_arg, cmpc_solver_res, cmpc_solver_iw, cmpc_solver_w,
                        solver_mem);
     PROFILE_END();
-    if (all_finite(zs, NU)) {
-        for (i = 0; i < NU; ++i) cand[nc][i] = zs[i];
+    if (all_finite(zs, NU)) { /* u = mid + half v, inside U */
+        for (i = 0; i < NU; ++i) {
+            double ui = cmpc_u_mid[i] + cmpc_u_half[i] * zs[i];
+            if (ui < cmpc_u_lo[i]) ui = cmpc_u_lo[i];
+            if (ui > cmpc_u_hi[i]) ui = cmpc_u_hi[i];
+            cand[nc][i] = ui;
+        }
         nc++;
         have_opt = 1;
     }
@@ -332,7 +341,7 @@ int cmpc_step(const double *x, double *u) {
     if (uw) {
         if (have_opt)
             for (k = 0; k < 3; ++k, ++nc)
-                for (i = 0; i < NU; ++i) cand[nc][i] = uw[i] + ts[k] * (zs[i] - uw[i]);
+                for (i = 0; i < NU; ++i) cand[nc][i] = uw[i] + ts[k] * (cand[0][i] - uw[i]);
         for (i = 0; i < NU; ++i) cand[nc][i] = uw[i];
         nc++;
     }

@@ -244,7 +244,8 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     **The solver's start** is the stored control of x's box (the middle of U without one),
     moved by one Newton step on the mean vertex cost (kept when it lowers that mean), with
     the epigraph variable at the largest vertex cost and multiplier 1 on that row; the
-    Python controller starts the same way, so both take the same iterations.
+    unknowns are scaled (u = mid(U) + half(U) v, costs divided by their start value). The
+    Python controller does the same, so both take the same iterations.
     """
     from ..mpc.contractive import ContractiveMPC
     from ..mpc.sequence import SetSequenceMPC
@@ -412,7 +413,11 @@ class _SequenceExport:
         out.append(_c_array("double", "cmpc_wv", V))
         out.append(_c_array("double", "cmpc_u_lo", model.U.lo))
         out.append(_c_array("double", "cmpc_u_hi", model.U.hi))
-        out.append(_c_array("double", "cmpc_u_mid", model.U.mid))
+        out.append(_c_array("double", "cmpc_u_mid", ctrl._u_mid))
+        # the solver's scaled control v: u = mid + half v, v in [v_lo, v_hi]
+        out.append(_c_array("double", "cmpc_u_half", ctrl._u_half))
+        out.append(_c_array("double", "cmpc_v_lo", ctrl._v_lo))
+        out.append(_c_array("double", "cmpc_v_hi", ctrl._v_hi))
         # NLP parameters (H column-major, h) per target level j = 0..L-2
         out.append(_c_array("double", "cmpc_nlp_H", self.nlp_H))
         out.append(_c_array("double", "cmpc_nlp_h", self.nlp_h))

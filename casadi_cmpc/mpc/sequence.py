@@ -307,6 +307,18 @@ class SetSequenceMPC:
         Hs = ca.SX.sym("H", r, n)
         hs = ca.SX.sym("h", r)
         f = model.function
+        # the solver sees scaled unknowns: u = mid(U) + half(U) v with v in [-1, 1], and the
+        # epigraph of the costs divided by their largest value at the start (parameter cs),
+        # so that its absolute tolerances mean the same at every magnitude of U and cost
+        U = model.U
+        half = 0.5 * (U.hi - U.lo)
+        self._u_mid = np.asarray(U.mid, dtype=float)
+        self._u_half = np.where(half > 0, half, 1.0)
+        self._v_lo = (U.lo - self._u_mid) / self._u_half
+        self._v_hi = (U.hi - self._u_mid) / self._u_half
+        v = ca.SX.sym("v", m)
+        cs = ca.SX.sym("cs")
+        uv = ca.DM(self._u_mid) + ca.DM(self._u_half) * v
         g, costs = [], []
         Q, R = ca.DM(self.Q), ca.DM(self.R)
         for wv in self._w_vertices:
@@ -314,11 +326,11 @@ class SetSequenceMPC:
             e = xn - ca.DM(self.x_ref)
             cost = ca.mtimes([e.T, Q, e]) + ca.mtimes([u.T, R, u])
             costs.append(cost)
-            g.append(cost - t)
+            g.append(cs * ca.substitute(cost, u, uv) - t)
             if r:
-                g.append(ca.mtimes(Hs, xn) - hs)
-        p = ca.vertcat(x, ca.vec(Hs), hs)
-        nlp = {"x": ca.vertcat(u, t), "f": t, "g": ca.vertcat(*g), "p": p}
+                g.append(ca.substitute(ca.mtimes(Hs, xn) - hs, u, uv))
+        p = ca.vertcat(x, ca.vec(Hs), hs, cs)
+        nlp = {"x": ca.vertcat(v, t), "f": t, "g": ca.vertcat(*g), "p": p}
         # one control, a few constraints: a short iteration budget (the applied control is
         # certified whatever the solver returns)
         short = {"ipopt.max_iter": 50} if self.solver == "ipopt" else {
@@ -357,21 +369,23 @@ class SetSequenceMPC:
         return ca.Function("start", [x, u], [u0, ca.substitute(cvec, u, u0)],
                            ["x", "u_guess"], ["u0", "costs"])
 
-    def _initial(self, x: np.ndarray, ug: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The solver's start ``(z_0, lam_g0)``: ``u_0`` from :meth:`_start_function`, the
-        epigraph variable at the largest vertex cost and multiplier 1 on that row, 0
-        elsewhere. Such a start satisfies complementarity: ``sqpmethod``, whose
-        convergence test does not check it, would otherwise stop at once where the mean
-        cost is stationary. Its tolerances are absolute, so on a badly scaled problem
-        (gradients near ``tol_du``) it may still stop early: the answer is a candidate,
-        certified or replaced like any other. The exported C does the same."""
+    def _initial(self, x: np.ndarray, ug: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, float]:
+        """The solver's start ``(z_0, lam_g0, cs)``: ``u_0`` from :meth:`_start_function`
+        (as the scaled ``v_0``), the epigraph variable at the largest vertex cost ``c_k``
+        and multiplier 1 on that row, 0 elsewhere; ``cs = 1 / c_k`` (1 when ``c_k`` is 0 or
+        not finite) scales the costs. Such a start satisfies complementarity:
+        ``sqpmethod``, whose convergence test does not check it, would otherwise stop at
+        once where the mean cost is stationary. The exported C does the same."""
         u0, c = self._start(x, ug)
         u0 = np.asarray(u0, dtype=float).reshape(-1)
         c = np.asarray(c, dtype=float).reshape(-1)
         k = _first_max(c)
+        cs = 1.0 / c[k] if np.isfinite(c[k]) and c[k] > 0 else 1.0
         lam = np.zeros(self._ng)
         lam[k * self._stride] = 1.0
-        return np.concatenate([u0, [c[k]]]), lam
+        v0 = (u0 - self._u_mid) / self._u_half
+        return np.concatenate([v0, [cs * c[k]]]), lam, cs
 
     def _target(self, i: int) -> Any:
         if i not in self._targets:
@@ -578,11 +592,11 @@ class SetSequenceMPC:
         m, n, r = self.model.m, self.model.n, self._rmax
         rows = self._rows(j, r) if r else None
         H, h = rows if rows is not None else (np.zeros((r, n)), np.ones(r))
-        p = np.concatenate([x, H.ravel(order="F"), h])
-        lbx = np.concatenate([self.model.U.lo, [-np.inf]])
-        ubx = np.concatenate([self.model.U.hi, [np.inf]])
+        lbx = np.concatenate([self._v_lo, [-np.inf]])
+        ubx = np.concatenate([self._v_hi, [np.inf]])
         try:
-            z0, lam0 = self._initial(x, self.model.U.mid if u0 is None else u0)
+            z0, lam0, cs = self._initial(x, self.model.U.mid if u0 is None else u0)
+            p = np.concatenate([x, H.ravel(order="F"), h, [cs]])
             sol = self._nlp(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=-np.inf, ubg=0.0,
                             lam_g0=lam0)
         except RuntimeError as exc:
@@ -590,8 +604,10 @@ class SetSequenceMPC:
             return None
         st = self._nlp.stats()
         stats["return_status"] = st.get("return_status")
-        u = np.asarray(sol["x"], dtype=float).reshape(-1)[:m]
-        return u if np.isfinite(u).all() else None
+        v = np.asarray(sol["x"], dtype=float).reshape(-1)[:m]
+        u = np.minimum(np.maximum(self._u_mid + self._u_half * v, self.model.U.lo),
+                       self.model.U.hi)
+        return u if np.isfinite(v).all() else None
 
     def _done(self, x: np.ndarray, u: np.ndarray, cost: float, lvl: int | None,
               cert: Certificate, stats: dict, mode: str, status: Status,

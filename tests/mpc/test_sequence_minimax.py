@@ -385,3 +385,34 @@ def test_minimax_new_arguments_are_checked():
         minimax(sq, U, W, 0.1, points=[[0.0, 1.0]])
     with pytest.raises(ValueError, match="points must be finite"):
         minimax(sq, U, W, 0.1, points=[[np.inf]])
+
+
+# ============================================================================ scaling
+@pytest.mark.parametrize("s", [1e-6, 1e-3, 1.0, 1e3, 1e6])
+@pytest.mark.parametrize("offset", [0.0, 5.0])
+def test_one_step_solver_answer_at_every_magnitude_of_u_and_cost(s, offset):
+    """The one-step NLP is solved in scaled unknowns (u = mid + half v, costs divided by
+    their start value), so sqpmethod's absolute tolerances mean the same whatever the
+    magnitude of U, of the gain and of R: the solver's control minimises the worst vertex
+    cost over U (no point of a fine grid does better) at every scale and offset of U."""
+    from casadi_cmpc.control.linear_sets import SetSequence
+
+    x, u, w = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("w")
+    c = offset * s
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * x[0] + 0.3 / s * (u - c) + w)
+    model = cm.Model(x=x, u=u, w=w, f=f, X=cm.Box([-1, -1], [1, 1]),
+                     U=cm.Box([c - s], [c + s]), W=cm.Box([-0.1], [0.1]), name="scaled")
+    B = cm.Box([-1, -1], [1, 1])
+    ctrl = cm.SetSequenceMPC(model, SetSequence(sets=[B, B]), R=0.01 / s ** 2,
+                             x_ref=[0.0, 0.0], solver="sqp", robust=True,
+                             minimax="vertices")
+    rng = np.random.default_rng(2)
+    G = np.linspace(c - s, c + s, 4001)
+    F = ctrl._costfun.map(G.size)
+    for xv in rng.uniform(-0.9, 0.9, (15, 2)):
+        ug = np.array([c + s * rng.uniform(-1, 1)])
+        uo = ctrl._solve_nlp(xv, 0, {}, ug)
+        assert uo is not None and c - s <= uo[0] <= c + s
+        best = float(np.min(np.asarray(F(np.repeat(xv[:, None], G.size, 1), G[None])[0])))
+        got = ctrl._cost(xv, uo)
+        assert got <= best + 1e-9 * (1 + best), (xv, uo, got, best)
