@@ -250,14 +250,15 @@ def _hull_in_flat(P: np.ndarray, origin: np.ndarray, U: np.ndarray
     if r == n == 2:
         A, vidx = _polygon_normals(P)
         return A, vidx, None
+    if r == 1:  # a segment (or an interval when n = 1): its two end points
+        U = np.eye(1) if n == 1 else U  # n = 1: keep the axis, the facets stay exact
+        z = ((P - origin) @ U)[:, 0]
+        return (np.array([[1.0], [-1.0]]),
+                np.unique([int(np.argmax(z)), int(np.argmin(z))]), U)
     if r == n:  # full-dimensional: no rotation (keeps axis-aligned facets exact)
         A_sub, vidx = _qhull(P - origin)
         return A_sub, vidx, np.eye(n)
     Z = (P - origin) @ U
-    if r == 1:
-        z = Z[:, 0]
-        return (np.array([[1.0], [-1.0]]),
-                np.unique([int(np.argmax(z)), int(np.argmin(z))]), U)
     A_sub, vidx = _qhull(Z)
     return A_sub, vidx, U
 

@@ -614,3 +614,21 @@ def test_plot_two_and_three_dimensions():
 def test_docstring_examples():
     result = doctest.testmod(polytope_module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(pts=st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=1, max_size=12))
+def test_hull_of_points_in_one_dimension_is_their_interval(pts):
+    """n = 1: the hull of points is [min, max] exactly (no Qhull, which needs 2-D data),
+    and the hull of intervals is the interval from the smallest to the largest end."""
+    V = np.asarray(pts, dtype=float)[:, None]
+    P = cm.Polytope.from_vertices(V)
+    lo, hi = float(V.min()), float(V.max())
+    assert P.contains(V).all()
+    assert not P.contains(np.array([[np.nextafter(hi, np.inf)], [np.nextafter(lo, -np.inf)]])
+                          ).any()
+    assert sorted(P.vertices().ravel().tolist()) == sorted({lo, hi})
+    Q = cm.Polytope.from_box(cm.Box([hi + 1.0], [hi + 2.0]))
+    H = cm.hull(P, Q) if hasattr(cm, "hull") else P.hull(Q)
+    assert H.contains(np.array([[lo], [hi + 2.0], [0.5 * (hi + hi + 1.0)]])).all()
+    assert not H.contains(np.array([[hi + 2.0 + 1e-6 * (1 + abs(hi))]])).any()
