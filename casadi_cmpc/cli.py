@@ -331,13 +331,36 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
     return "\n".join(lines)
 
 
+def export_controller(ex: Any, controller: str = "auto", cache: Any = None,
+                      progress: bool | None = None) -> Any:
+    """The controller ``cmpc export`` writes for an example (solver ``"sqp"``): the
+    example's SetSequenceMPC (sets from the cache) or its ContractiveMPC at a fixed horizon
+    (``horizon_max`` when the example searches the horizon). Raises ValueError for the LP
+    form, which has no C export."""
+    from .mpc.contractive import ContractiveMPC
+    from .mpc.sequence import SetSequenceMPC
+
+    ctrl, seq = _controller(ex, controller, cache, progress)
+    if isinstance(ctrl, SetSequenceMPC):
+        cfg = ex.info["sequence"]
+        return SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
+                              local_law=ex.local_law, solver="sqp", robust=cfg["robust"])
+    kw = dict(ex.info["mpc"])
+    if kw.get("solver") == "lp":
+        raise ValueError(f"example '{ex.name}' uses the LP form of the contractive MPC "
+                         "(solver='lp'), which has no C export; the sqp and ipopt forms "
+                         "have one")
+    kw["solver"] = "sqp"
+    if kw.get("horizon") is None:
+        kw["horizon"] = kw.get("horizon_max", 10)
+    return ContractiveMPC(ex.model, **kw)
+
+
 def _export(args: Any) -> int:
     """``cmpc export``: the example's controller (solver sqp) written as C."""
     from . import models
     from .codegen import build, export_c
     from .codegen.export import ExportError
-    from .mpc.contractive import ContractiveMPC
-    from .mpc.sequence import SetSequenceMPC
 
     try:
         ex = models.load(args.example)
@@ -350,26 +373,11 @@ def _export(args: Any) -> int:
               file=sys.stderr)
         return 2
     try:
-        ctrl, seq = _controller(ex, args.controller, args.cache,
-                                False if args.no_progress else None)
+        ctrl = export_controller(ex, args.controller, args.cache,
+                                 False if args.no_progress else None)
     except ValueError as exc:
         print(f"cmpc export: {exc}", file=sys.stderr)
         return 2
-    if isinstance(ctrl, SetSequenceMPC):
-        cfg = ex.info["sequence"]
-        ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
-                              local_law=ex.local_law, solver="sqp", robust=cfg["robust"])
-    else:
-        kw = dict(ex.info["mpc"])
-        if kw.get("solver") == "lp":
-            print(f"cmpc export: example '{ex.name}' uses the LP form of the contractive MPC "
-                  "(solver='lp'), which has no C export; the sqp and ipopt forms have one",
-                  file=sys.stderr)
-            return 2
-        kw["solver"] = "sqp"
-        if kw.get("horizon") is None:
-            kw["horizon"] = kw.get("horizon_max", 10)
-        ctrl = ContractiveMPC(ex.model, **kw)
     x0s = np.asarray(ex.info.get("run", {}).get("x0s", ex.x0s), dtype=float)
     x0 = x0s.reshape(-1, ex.model.n)[0] if x0s.size else None
     try:
