@@ -414,6 +414,7 @@ int cmpc_step(const double *x, double *u) {
     for (k = 0; k < CMPC_NC; ++k) {
         double a = fabs(e[k]);
         if (CMPC_NORM == 2) r0 += a * a;
+        else if (CMPC_NORM == 1) r0 += a;
         else if (a > r0) r0 = a;
     }
     if (CMPC_NORM == 2) r0 = sqrt(r0);
@@ -436,11 +437,19 @@ int cmpc_step(const double *x, double *u) {
             z0[k * NU + i] = have_warm
                 ? warm[(k + 1 < CMPC_N ? k + 1 : CMPC_N - 1) * NU + i]
                 : clip(cmpc_u_ref[i], cmpc_u_lo[i], cmpc_u_hi[i]);
-    if (CMPC_NZX > 0) { /* multiple shooting: the states predicted from that sequence */
+    if (CMPC_NZX > 0 || CMPC_NT > 0) { /* the states predicted from that sequence */
+        static double xp[CMPC_N * NX];
         cmpc_pred_arg[0] = z0;
         cmpc_pred_arg[1] = x;
-        cmpc_pred_res[0] = z0 + NN + CMPC_NT;
+        cmpc_pred_res[0] = xp;
         cmpc_pred(cmpc_pred_arg, cmpc_pred_res, cmpc_pred_iw, cmpc_pred_w, 0);
+        for (k = 0; k < CMPC_NT; ++k) { /* 1-norm slacks: |C (x(N) - x_ref)| / r0 + 1e-3 */
+            double eN = 0.0;
+            for (i = 0; i < NX; ++i)
+                eN += cmpc_C[k * NX + i] * (xp[(CMPC_N - 1) * NX + i] - cmpc_x_ref[i]);
+            z0[NN + k] = fabs(eN) / r0 + 1e-3;
+        }
+        for (i = 0; i < CMPC_NZX; ++i) z0[NN + CMPC_NT + i] = xp[i]; /* multiple shooting */
     }
     for (i = 0; i < NX; ++i) p[i] = x[i];
     p[NX] = 1.0 / r0;

@@ -469,8 +469,9 @@ class _ContractiveExport:
         if ctrl.horizon is None:
             raise ExportError("export needs a fixed horizon: build the ContractiveMPC with "
                               "horizon=N (the horizon search runs set inversions)")
-        if ctrl.norm == 1 or ctrl.gauge is not None:
-            raise ExportError("export supports the 2- and inf-norm contractions")
+        if ctrl.gauge is not None:
+            raise ExportError("a polytope gauge contraction is an LP form (solver='lp'), "
+                              "which has no C export")
         if ctrl.mode != "receding":
             raise ExportError("export supports mode='receding' only")
         self.N = ctrl.horizon

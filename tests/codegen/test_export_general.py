@@ -168,12 +168,15 @@ def contractive_models():
     return out
 
 
-@pytest.mark.parametrize("k, shooting", [(0, "multiple"), (0, "single"), (1, "multiple")],
-                         ids=["3-state", "3-state-single-shooting", "4-state"])
-def test_contractive_nonzero_reference_closed_loop_matches(k, shooting, tmp_path):
+@pytest.mark.parametrize("k, shooting, norm", [
+    (0, "multiple", 2), (0, "single", 2), (1, "multiple", 2), (0, "multiple", 1),
+    (1, "single", 1), (1, "multiple", np.inf)],
+    ids=["3-state", "3-state-single-shooting", "4-state", "3-state-norm-1",
+         "4-state-single-norm-1", "4-state-norm-inf"])
+def test_contractive_nonzero_reference_closed_loop_matches(k, shooting, norm, tmp_path):
     model, xe, ue = contractive_models()[k]
     ctrl = cm.ContractiveMPC(model, horizon=6, alpha=0.9, x_ref=xe, u_ref=ue, solver="sqp",
-                             R=0.1 * np.eye(2), shooting=shooting)
+                             R=0.1 * np.eye(2), shooting=shooting, norm=norm)
     info = ctrl.export_c(tmp_path / "c", x0=xe + 0.3)
     C = load(info.directory)
     rng = np.random.default_rng(k)
