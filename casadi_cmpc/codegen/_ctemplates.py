@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from ._interval_c import PRELUDE
+
 _COMMON = r"""
 #define NX CMPC_NX
 #define NU CMPC_NU
@@ -28,6 +30,27 @@ void cmpc_model(const double *x, const double *u, const double *w, double *x_nex
     cmpc_f_arg[2] = NW > 0 ? w : cmpc_no_w;
     cmpc_f_res[0] = x_next;
     cmpc_f(cmpc_f_arg, cmpc_f_res, cmpc_f_iw, cmpc_f_w, 0);
+}
+
+/* The natural interval inclusion of f at the point (x, u, w), outward rounded (generated
+ * from the model's instruction list above): the exact real value of every component of
+ * f(x, u, w) lies in [lo[i], hi[i]]; [-inf, inf] where f may be undefined. */
+void cmpc_model_iv(const double *x, const double *u, const double *w, double *lo,
+                   double *hi) {
+    const double *in[3];
+    double *ol[1], *oh[1];
+    int i;
+    in[0] = x;
+    in[1] = u;
+    in[2] = NW > 0 ? w : cmpc_no_w;
+    ol[0] = lo;
+    oh[0] = hi;
+    cmpc_f_iv(in, in, ol, oh);
+    for (i = 0; i < NX; ++i)
+        if (lo[i] != lo[i] || hi[i] != hi[i]) {
+            lo[i] = -INFINITY;
+            hi[i] = INFINITY;
+        }
 }
 
 static int all_finite(const double *v, int k) {
@@ -181,21 +204,23 @@ int cmpc_level(const double *x) {
 }
 
 /* ---------------------------------------------------------------- successor check */
-/* all vertex images y[v] in the polytope (rows widened by the check margin) */
-static int images_in_poly(const double *A, const double *b, int rows,
-                          double y[][NX]) {
-    int k, v, i;
-    for (k = 0; k < rows; ++k) {
-        for (v = 0; v < CMPC_NV; ++v) {
-            double s = 0.0, mag = 0.0;
-            for (i = 0; i < NX; ++i) {
-                double t = A[k * NX + i] * y[v][i];
-                s += t;
-                mag += fabs(t);
-            }
-            if (!(s + CMPC_CHECK_REL * mag + CMPC_CHECK_ABS <= b[k])) return 0;
-        }
-    }
+/* An upper bound of a.y over the box [lo, hi] (NX entries), each product and sum rounded
+ * upward: a.y <= row_upper(a, lo, hi) for every real y in the box. */
+static double row_upper(const double *a, const double *lo, const double *hi) {
+    double s = 0.0;
+    int i;
+    for (i = 0; i < NX; ++i)
+        if (a[i] != 0.0) s = civ_up(s + civ_up(a[i] * (a[i] > 0.0 ? hi[i] : lo[i])));
+    return s;
+}
+
+/* every image box [lo[v], hi[v]] inside the polytope {y : A y <= b} */
+static int images_in_poly(const double *A, const double *b, int rows, double lo[][NX],
+                          double hi[][NX]) {
+    int k, v;
+    for (k = 0; k < rows; ++k)
+        for (v = 0; v < CMPC_NV; ++v)
+            if (!(row_upper(A + k * NX, lo[v], hi[v]) <= b[k])) return 0;
     return 1;
 }
 
@@ -205,9 +230,10 @@ static int box_covered(const double *lo, const double *hi, int j) {
     for (d = 0; d < NX; ++d) {
         const double *e = cmpc_edges + cmpc_edge_off[d];
         int E = cmpc_n_edges[d], top = E > 1 ? E - 2 : 0;
-        if (!(lo[d] >= e[0] && hi[d] <= e[E - 1] && lo[d] < hi[d])) return 0;
+        if (!(lo[d] >= e[0] && hi[d] <= e[E - 1] && lo[d] <= hi[d])) return 0;
         a[d] = clampi(last_le(e, E, lo[d]), 0, top);
         b[d] = clampi(last_lt(e, E, hi[d]), 0, top);
+        if (b[d] < a[d]) b[d] = a[d]; /* a point on an edge: the cell starting there */
         c[d] = a[d];
     }
     for (;;) {
@@ -224,39 +250,39 @@ static int box_covered(const double *lo, const double *hi, int j) {
     }
 }
 
-/* f(x, u, w) in K_j for every vertex w of W (see the header notes) */
+/* Proves f(x, u, w) in K_j for every w in W (the nominal w when not robust): u in U, and
+ * the interval enclosure of f at each vertex w_v of W (cmpc_model_iv) inside T, or inside
+ * one polytope of level <= j (all vertex boxes: the polytope is convex and, f being affine
+ * in w, f(x, u, W) is the convex hull of the vertex images), or the hull of the vertex boxes
+ * covered by the boxes of steps 1..j. */
 static int successor_in(const double *x, const double *u, int j) {
-    double y[CMPC_NV][NX];
+    double lo[CMPC_NV][NX], hi[CMPC_NV][NX];
     int v, i, p;
     for (i = 0; i < NU; ++i)
         if (!(u[i] >= cmpc_u_lo[i] && u[i] <= cmpc_u_hi[i])) return 0;
     for (v = 0; v < CMPC_NV; ++v) {
-        cmpc_model(x, u, cmpc_wv + v * NW, y[v]);
-        if (!all_finite(y[v], NX)) return 0;
+        cmpc_model_iv(x, u, cmpc_wv + v * NW, lo[v], hi[v]);
+        if (!all_finite(lo[v], NX) || !all_finite(hi[v], NX)) return 0;
     }
-    if (images_in_poly(cmpc_T_A, cmpc_T_b, CMPC_T_ROWS, y)) return 1;
+    if (images_in_poly(cmpc_T_A, cmpc_T_b, CMPC_T_ROWS, lo, hi)) return 1;
     if (CMPC_POLYTOPIC) {
         for (p = 0; p < CMPC_NPOLY; ++p)
             if (cmpc_poly_level[p] <= j &&
                 images_in_poly(cmpc_poly_A + cmpc_poly_off[p] * NX,
-                               cmpc_poly_b + cmpc_poly_off[p], cmpc_poly_rows[p], y))
+                               cmpc_poly_b + cmpc_poly_off[p], cmpc_poly_rows[p], lo, hi))
                 return 1;
         return 0;
     } else {
-        double lo[NX], hi[NX];
+        double l[NX], h[NX];
         for (i = 0; i < NX; ++i) {
-            double m;
-            lo[i] = hi[i] = y[0][i];
+            l[i] = lo[0][i];
+            h[i] = hi[0][i];
             for (v = 1; v < CMPC_NV; ++v) {
-                if (y[v][i] < lo[i]) lo[i] = y[v][i];
-                if (y[v][i] > hi[i]) hi[i] = y[v][i];
+                if (lo[v][i] < l[i]) l[i] = lo[v][i];
+                if (hi[v][i] > h[i]) h[i] = hi[v][i];
             }
-            m = CMPC_CHECK_REL * (fabs(lo[i]) > fabs(hi[i]) ? fabs(lo[i]) : fabs(hi[i]))
-                + CMPC_CHECK_ABS;
-            lo[i] -= m;
-            hi[i] += m;
         }
-        return box_covered(lo, hi, j);
+        return box_covered(l, h, j);
     }
 }
 
@@ -368,7 +394,6 @@ _CONTRACTIVE = r"""
 #define NN (CMPC_N * NU)
 
 WORK(cmpc_solver)
-WORK(cmpc_check)
 WORK(cmpc_pred)
 #if CMPC_HAS_LAW
 WORK(cmpc_law)
@@ -399,8 +424,33 @@ int cmpc_level(const double *x) {
 
 static double clip(double v, double a, double b) { return v < a ? a : (v > b ? b : v); }
 
+/* Proves the sequence useq from x: the interval enclosure (cmpc_check_iv, generated from the
+ * instruction list of the exact check graph: u and x thin, the constants of the model and
+ * the controller as the intervals cmpc_par_lo/hi) of every row (predicted states in X, path
+ * and terminal rows, contraction) lies within [cmpc_check_lo, cmpc_check_hi]. */
+static int check_rows(const double *useq, const double *x) {
+    static double zl[CMPC_NCHECK_IN], zh[CMPC_NCHECK_IN], rl[CMPC_NCHECK], rh[CMPC_NCHECK];
+    const double *il[1], *ih[1];
+    double *ol[1], *oh[1];
+    int i;
+    for (i = 0; i < NN; ++i) zl[i] = zh[i] = useq[i];
+    for (i = 0; i < NX; ++i) zl[NN + i] = zh[NN + i] = x[i];
+    for (i = NN + NX; i < CMPC_NCHECK_IN; ++i) {
+        zl[i] = cmpc_par_lo[i - NN - NX];
+        zh[i] = cmpc_par_hi[i - NN - NX];
+    }
+    il[0] = zl;
+    ih[0] = zh;
+    ol[0] = rl;
+    oh[0] = rh;
+    cmpc_check_iv(il, ih, ol, oh);
+    for (i = 0; i < CMPC_NCHECK; ++i) /* NaN (possibly undefined) fails */
+        if (!(rl[i] - cmpc_check_lo[i] >= 0.0 && cmpc_check_hi[i] - rh[i] >= 0.0)) return 0;
+    return 1;
+}
+
 int cmpc_step(const double *x, double *u) {
-    static double z0[NZ], p[NX + 1], zs[NZ], fval, lx[NZ], lg[NG + 1], rows[CMPC_NCHECK];
+    static double z0[NZ], p[NX + 1], zs[NZ], fval, lx[NZ], lg[NG + 1];
     static double useq[NN];
     double e[CMPC_NC], r0 = 0.0;
     int i, k, same = 1, flag, ok;
@@ -472,12 +522,7 @@ int cmpc_step(const double *x, double *u) {
         for (k = 0; k < CMPC_N; ++k)
             for (i = 0; i < NU; ++i)
                 useq[k * NU + i] = clip(zs[k * NU + i], cmpc_u_lo[i], cmpc_u_hi[i]);
-        cmpc_check_arg[0] = useq;
-        cmpc_check_arg[1] = x;
-        cmpc_check_res[0] = rows;
-        cmpc_check(cmpc_check_arg, cmpc_check_res, cmpc_check_iw, cmpc_check_w, 0);
-        for (i = 0; i < CMPC_NCHECK && ok; ++i)
-            ok = rows[i] >= cmpc_check_lo[i] && rows[i] <= cmpc_check_hi[i];
+        ok = check_rows(useq, x);
         if (ok) {
             for (i = 0; i < NN; ++i) warm[i] = useq[i];
             have_warm = 1;
@@ -501,11 +546,25 @@ int cmpc_step(const double *x, double *u) {
 """
 
 
+_SEQUENCE_CHECK = (
+    "A level i >= 1 without CMPC_FLAG_UNVERIFIED is proved: u lies in U and f(x, u, w) lies "
+    "in K_{i-1} for every w in W (the nominal w when the controller is nominal), in exact "
+    "real arithmetic. The check encloses f at x, u and each vertex of W by outward-rounded "
+    "interval arithmetic generated from the model's expression graph (cmpc_model_iv); the "
+    "images of W, convex hulls of the vertex images for a model affine in w, must lie in a "
+    "polytope of the sequence (row sums rounded upward) or their interval hull in the boxes "
+    "of steps 1..i-1. With CMPC_FLAG_UNVERIFIED nothing is claimed about the applied control.")
+_CONTRACTIVE_CHECK = (
+    "A code 1 without CMPC_FLAG_UNVERIFIED is proved for the nominal model: the applied move "
+    "is the first of a sequence whose predicted states, path and terminal rows and "
+    "contraction were enclosed by outward-rounded interval arithmetic (generated from the "
+    "check's expression graph, the same rows as the Python certificate) and found within "
+    "their bounds. With CMPC_FLAG_UNVERIFIED (the fallback) nothing is claimed.")
+
+
 def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
     from .export import (
         BAD_INPUT,
-        CHECK_ABS,
-        CHECK_REL,
         FLAG_BLEND,
         FLAG_FALLBACK,
         FLAG_SOLVER_FAILED,
@@ -521,6 +580,8 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
               else "0 = local law (or x at the reference), 1 = the MPC problem was solved")
     levels = textwrap.fill("bits (CMPC_LEVEL(code)) are " + levels, 88,
                            initial_indent=" *       ", subsequent_indent=" *       ")
+    check = textwrap.fill(_SEQUENCE_CHECK if kind == "set_sequence" else _CONTRACTIVE_CHECK,
+                          88, initial_indent=" * ", subsequent_indent=" * ")
     return f"""/* Controller exported from casadi_cmpc: {what}.
  * Model '{model.name}': n = {model.n} states, m = {model.m} inputs, l = {model.l} disturbances.
  * Solver: {solver}{' (standalone C, libc and libm only)' if solver == 'sqp' else
@@ -536,11 +597,11 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
  *                                      in no set; CMPC_BAD_INPUT: x not finite)
  *   void cmpc_reset(void);             forget warm starts
  *   void cmpc_model(const double *x, const double *u, const double *w, double *x_next);
- *                                      the model f(x, u, w) (for simulation)
+ *                                      the model f(x, u, w) in floating point (simulation)
+ *   void cmpc_model_iv(const double *x, const double *u, const double *w, double *lo,
+ *                      double *hi);    an interval [lo, hi] holding the exact f(x, u, w)
  *
- * The successor check evaluates the model in floating point at the candidate control and
- * the vertices of W, with images widened by CMPC_CHECK_REL (relative); for models affine in
- * w it is exact up to rounding. It is a run-time check, not an interval proof.
+{check}
  */
 #ifndef CMPC_CONTROLLER_H
 #define CMPC_CONTROLLER_H
@@ -565,30 +626,34 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
 /* contractive MPC: the next move of the last checked sequence (or u_ref) was applied */
 #define CMPC_FLAG_FALLBACK {FLAG_FALLBACK}
 
-#define CMPC_CHECK_REL {CHECK_REL!r}
-#define CMPC_CHECK_ABS {CHECK_ABS!r}
-
 int cmpc_step(const double *x, double *u);
 int cmpc_level(const double *x);
 void cmpc_reset(void);
 void cmpc_model(const double *x, const double *u, const double *w, double *x_next);
+void cmpc_model_iv(const double *x, const double *u, const double *w, double *lo, double *hi);
 
 #endif
 """
 
 
-def _source(model: Any, body: str) -> str:
+def _source(body: str, intervals: str) -> str:
+    """cmpc_controller.c: includes, the interval helpers and the generated interval
+    evaluations (``intervals``), the common part, then ``body``."""
     return ("/* Exported controller logic (generated by casadi_cmpc; do not edit). */\n"
-            "#include <math.h>\n#include \"cmpc_controller.h\"\n#include \"cmpc_casadi.h\"\n"
-            "#include \"cmpc_tables.h\"\n" + _COMMON + body)
+            "#include <float.h>\n#include <math.h>\n"
+            "#include \"cmpc_controller.h\"\n#include \"cmpc_casadi.h\"\n"
+            "#include \"cmpc_tables.h\"\n" + PRELUDE + "\n" + intervals + _COMMON + body)
 
 
-def sequence_source(model: Any) -> str:
-    return _source(model, _SEQUENCE)
+def sequence_source(intervals: str) -> str:
+    """The logic of a set-sequence controller; ``intervals`` defines ``cmpc_f_iv``."""
+    return _source(_SEQUENCE, intervals)
 
 
-def contractive_source(model: Any) -> str:
-    return _source(model, _CONTRACTIVE)
+def contractive_source(intervals: str) -> str:
+    """The logic of a contractive MPC; ``intervals`` defines ``cmpc_f_iv`` and
+    ``cmpc_check_iv``."""
+    return _source(_CONTRACTIVE, intervals)
 
 
 def example(model: Any, x0: np.ndarray, steps: int, seed: int) -> str:

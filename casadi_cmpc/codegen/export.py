@@ -40,10 +40,6 @@ FLAG_UNVERIFIED = 1 << 19
 FLAG_FALLBACK = 1 << 20
 LEVEL_MASK = 0xFFFF
 
-#: Relative and absolute margins of the C check of a successor (floating point, see notes).
-CHECK_REL = 1e-12
-CHECK_ABS = 1e-300
-
 _CG_OPTS = {"with_header": True, "casadi_real": "double", "casadi_int": "long long int",
             "verbose_runtime": False, "main": False, "mex": False}
 _PRAGMA = ("/* CasADi's generated code leaves some parameters unused (iw, w, mem) */\n"
@@ -231,15 +227,32 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     (-1): ``x`` lies in no set (``u`` is NaN). ``CMPC_BAD_INPUT`` (-2): a NaN or infinite
     state.
 
-    **The C check of a successor** evaluates the model at the candidate control and every
-    vertex of W (the centre of W for a nominal controller) in floating point. The successor
-    must lie in ``K_{i-1}``: in the terminal polytope (every row, at every vertex image) or,
-    for box sequences, its bounding box must be covered by the boxes of steps ``1..i-1``
-    (exact grid of the box bounds). The images are widened by ``1e-12`` relative (the
-    check errs on the strict side). For models affine in w the vertex images span the image
-    of W, so the check is exact up to rounding; it is not an interval proof (the Python
-    controller's certificate is). A robust controller of a model not affine in w is refused
-    (ExportError): its vertex images would not bound the image of W.
+    **The C check of a successor** proves, in exact real arithmetic, that ``u`` lies in U
+    and that ``f(x, u, w)`` lies in ``K_{i-1}`` for every ``w`` in W (for the nominal ``w``
+    when the controller is nominal): a level ``i >= 1`` returned without
+    ``CMPC_FLAG_UNVERIFIED`` carries that proof. It encloses f at ``x``, ``u`` and each
+    vertex of W with ``cmpc_model_iv``, an interval evaluation generated from the CasADi
+    instruction list of the model: the natural inclusion at the point, outward rounded as
+    the Python backend rounds (each bound of a ``+ - * /`` or ``sqrt`` moved outward by
+    ``|v| 2**-52 + 2**-1074``, at least one ulp in every rounding mode; ``2**-44`` relative
+    for libm functions; ``[-inf, inf]`` where f may be undefined). For a model affine in w,
+    ``f(x, u, W)`` is the convex hull of the vertex images, so it lies in ``K_{i-1}`` when
+    every vertex box lies in one convex polytope of the sequence (each row ``a.y <= b``
+    tested with an upper bound of ``a.y`` over the box, products and sums rounded upward)
+    or, for box sequences, when the interval hull of the vertex boxes is covered by the
+    boxes of steps ``1..i-1`` (exact grid of the box bounds). A robust controller of a
+    model not affine in w is refused (ExportError): its vertex images would not bound the
+    image of W; so is a model holding an operation without an interval rule in C (e.g.
+    ``erfinv``). The Python controller's certificate proves the same statement with one
+    interval evaluation over the whole box W (the C check, per vertex, is tighter for a
+    model affine in w). With ``CMPC_FLAG_UNVERIFIED`` nothing is claimed about the applied
+    control.
+
+    **The C check of a contractive MPC** evaluates the same exact check graph as the Python
+    certificate (predicted states in X, path and terminal rows, contraction) by the same
+    kind of generated interval evaluation, at the clipped solver sequence; a move returned
+    without ``CMPC_FLAG_UNVERIFIED`` is the first of a sequence so proved for the nominal
+    model. The fallback (``CMPC_FLAG_FALLBACK | CMPC_FLAG_UNVERIFIED``) claims nothing.
 
     **The solver's start** is the stored control of x's box (the middle of U without one),
     moved by one Newton step on the mean vertex cost (kept when it lowers that mean), with
@@ -290,6 +303,25 @@ def _model_fun(model: Any) -> ca.Function:
     return ca.Function("cmpc_f", [model.x, model.u, w], [model.f], ["x", "u", "w"], ["x_next"])
 
 
+def _interval_c(funs: list[tuple[ca.Function, str]], what: str) -> str:
+    """C text of the outward-rounded interval evaluations ``name(il, ih, ol, oh)`` of the
+    given Functions (see :mod:`._interval_c`); an ExportError names the operations without
+    an interval rule."""
+    from ._interval_c import UnsupportedIntervalOp, interval_function
+
+    out = []
+    for fun, name in funs:
+        try:
+            out.append(interval_function(fun, name))
+        except UnsupportedIntervalOp as exc:
+            raise ExportError(
+                f"{what} needs an interval enclosure of the model in C, and {exc}; the C "
+                "export has rules for the arithmetic, sqrt, powers, exp/log, trigonometric "
+                "and hyperbolic functions, erf, fmin/fmax, fabs, floor/ceil, sign, "
+                "comparisons and if_else: rewrite the model with these") from exc
+    return "\n".join(out)
+
+
 class _SequenceExport:
     """Tables and logic of a :class:`~casadi_cmpc.SetSequenceMPC`."""
 
@@ -318,6 +350,9 @@ class _SequenceExport:
                               "first (cm.controllable_sets)")
         if ctrl._law is None:
             raise ExportError("the controller has no local law for the terminal set")
+        self.model_fun = _model_fun(model)
+        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv")],
+                                     "the C check of a successor")
         T0 = seq.sets[0]
         if isinstance(T0, Box):
             T0 = Polytope.from_box(T0)
@@ -391,7 +426,7 @@ class _SequenceExport:
         u0, c = ctrl._start(x, u)
         start = ca.Function("cmpc_start", [x, u], [u0, c], ["x", "u_guess"], ["u0", "costs"])
         law = ca.Function("cmpc_law", [x], [ctrl._law(x)], ["x"], ["u"])
-        return [S, _model_fun(model), law, start]
+        return [S, self.model_fun, law, start]
 
     def tables(self) -> str:
         ctrl, model = self.ctrl, self.ctrl.model
@@ -450,7 +485,7 @@ class _SequenceExport:
         return T.header(self.ctrl.model, self.kind, self.solver, self.sizes)
 
     def source(self) -> str:
-        return T.sequence_source(self.ctrl.model)
+        return T.sequence_source(self.intervals)
 
 
 class _ContractiveExport:
@@ -485,6 +520,12 @@ class _ContractiveExport:
         self.S = S
         self.sizes = {"horizon": self.N, "local_rows": 0 if S is None else S.A.shape[0],
                       "constraints": int(self.h.lbg.size)}
+        # the check of a sequence: the interval evaluation of the exact check graph, the
+        # one the Python controller certifies with (constants as intervals param_lo/hi)
+        self.model_fun = _model_fun(ctrl.model)
+        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv"),
+                                      (self.h.check_fun, "cmpc_check_iv")],
+                                     "the C check of a predicted sequence")
 
     def default_x0(self) -> np.ndarray:
         return self.ctrl.model.X.mid
@@ -496,18 +537,11 @@ class _ContractiveExport:
         plugin, opts = _solver_options(ctrl.solver, ctrl.solver_options)
         py_solver = "sqp" if plugin == "sqpmethod" else "ipopt"
         S = _solver_for_export(h.nlp, "cmpc_solver", self.solver, py_solver, opts)
-        funs = [S, _model_fun(model)]
-        # the check: predicted states, extra constraints, terminal rows and contraction,
-        # from the float graph (the same rows as the interval check of the Python side)
-        fl = _graph(ctrl, self.N, exact=False)
-        chk = ca.Function("cmpc_check", [fl["us"], fl["x0"]],
-                          [ca.vertcat(fl["common"], fl["c_val"])], ["u", "x0"], ["rows"])
-        funs.append(chk)
+        funs = [S, self.model_fun]
         # the states predicted from the warm-started sequence (multiple shooting's start)
+        fl = _graph(ctrl, self.N, exact=False)
         funs.append(ca.Function("cmpc_pred", [fl["us"], fl["x0"]],
                                 [ca.vec(ca.horzcat(*fl["xs"][1:]))], ["u", "x0"], ["x"]))
-        self.check_lo = np.concatenate([fl["c_lo"], [-np.inf]])
-        self.check_hi = np.concatenate([fl["c_hi"], [0.0]])
         if ctrl._law is not None:
             x = ca.SX.sym("x", model.n)
             funs.append(ca.Function("cmpc_law", [x], [ctrl._law(x)], ["x"], ["u"]))
@@ -522,14 +556,16 @@ class _ContractiveExport:
         out.append(f"#define CMPC_NT {h.n_t}")
         out.append(f"#define CMPC_NZX {h.n_zx}")
         out.append(f"#define CMPC_NG {h.lbg.size}")
-        out.append(f"#define CMPC_NCHECK {self.check_lo.size}")
+        out.append(f"#define CMPC_NCHECK {h.check_lo.size}")
+        out.append(f"#define CMPC_NCHECK_IN {h.check_fun.nnz_in(0)}")
         out.append(f"#define CMPC_HAS_LAW {0 if self.S is None else 1}")
         out.append(f"#define CMPC_S_ROWS {0 if self.S is None else self.S.A.shape[0]}")
         out.append(f"#define CMPC_NORM {_norm_code(ctrl.norm)}")
         out.append("")
         for name, v in (("cmpc_lbz", h.lbz), ("cmpc_ubz", h.ubz), ("cmpc_lbg", h.lbg),
-                        ("cmpc_ubg", h.ubg), ("cmpc_check_lo", self.check_lo),
-                        ("cmpc_check_hi", self.check_hi), ("cmpc_u_lo", model.U.lo),
+                        ("cmpc_ubg", h.ubg), ("cmpc_check_lo", h.check_lo),
+                        ("cmpc_check_hi", h.check_hi), ("cmpc_par_lo", h.param_lo),
+                        ("cmpc_par_hi", h.param_hi), ("cmpc_u_lo", model.U.lo),
                         ("cmpc_u_hi", model.U.hi), ("cmpc_x_ref", ctrl.x_ref),
                         ("cmpc_u_ref", np.clip(ctrl.u_ref, model.U.lo, model.U.hi)),
                         ("cmpc_C", ctrl.contract),
@@ -549,7 +585,7 @@ class _ContractiveExport:
         return T.header(self.ctrl.model, self.kind, self.solver, self.sizes)
 
     def source(self) -> str:
-        return T.contractive_source(self.ctrl.model)
+        return T.contractive_source(self.intervals)
 
 
 def _norm_code(norm: float) -> int:
@@ -602,12 +638,15 @@ class CompiledController:
         self._lib.cmpc_level.restype = ctypes.c_int
         self._lib.cmpc_model.argtypes = [dp, dp, dp, dp]
         self._lib.cmpc_model.restype = None
+        self._lib.cmpc_model_iv.argtypes = [dp, dp, dp, dp, dp]
+        self._lib.cmpc_model_iv.restype = None
         self._lib.cmpc_reset.argtypes = []
         self._lib.cmpc_reset.restype = None
         self._x = (ctypes.c_double * n)()
         self._u = (ctypes.c_double * max(m, 1))()
         self._w = (ctypes.c_double * max(l, 1))()
         self._xn = (ctypes.c_double * n)()
+        self._xh = (ctypes.c_double * n)()
 
     def step(self, x: Any) -> tuple[np.ndarray, int]:
         """``(u, code)`` of ``cmpc_step`` at x."""
@@ -629,7 +668,12 @@ class CompiledController:
         return int(self._lib.cmpc_level(self._x))
 
     def model(self, x: Any, u: Any, w: Any = None) -> np.ndarray:
-        """The generated model ``f(x, u, w)``."""
+        """The generated model ``f(x, u, w)`` (floating point)."""
+        self._set_xuw(x, u, w)
+        self._lib.cmpc_model(self._x, self._u, self._w, self._xn)
+        return np.array(self._xn[:], dtype=float)
+
+    def _set_xuw(self, x: Any, u: Any, w: Any) -> None:
         for i, v in enumerate(np.asarray(x, dtype=float).reshape(self.n)):
             self._x[i] = v
         for i, v in enumerate(np.asarray(u, dtype=float).reshape(self.m)):
@@ -637,8 +681,14 @@ class CompiledController:
         if self.l:
             for i, v in enumerate(np.asarray(w, dtype=float).reshape(self.l)):
                 self._w[i] = v
-        self._lib.cmpc_model(self._x, self._u, self._w, self._xn)
-        return np.array(self._xn[:], dtype=float)
+
+    def model_iv(self, x: Any, u: Any, w: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """``cmpc_model_iv``: bounds ``(lo, hi)`` (n,) that hold the exact real value of
+        ``f(x, u, w)`` (outward-rounded interval evaluation; ``[-inf, inf]`` where f may be
+        undefined)."""
+        self._set_xuw(x, u, w)
+        self._lib.cmpc_model_iv(self._x, self._u, self._w, self._xn, self._xh)
+        return np.array(self._xn[:], dtype=float), np.array(self._xh[:], dtype=float)
 
     def reset(self) -> None:
         """Forget the warm starts kept between calls."""

@@ -1,0 +1,533 @@
+"""C source of outward-rounded interval evaluations of CasADi SX Functions.
+
+:func:`interval_function` walks the instruction list of a Function (``n_instructions``,
+``instruction_id``/``input``/``output``/``constant``) and writes one straight-line C
+function that evaluates its natural interval inclusion: every work slot holds an interval
+``civ {lo, hi}`` and every operation calls the helper of :data:`PRELUDE` of the same name.
+
+Rounding rules (those of :mod:`casadi_cmpc.interval.arith`):
+
+* ``+ - * /`` and ``sqrt`` (correctly rounded by IEEE 754): a lower bound ``v`` becomes
+  ``v - (|v| 2**-52 + 2**-1074)`` and an upper bound ``v + (|v| 2**-52 + 2**-1074)``
+  (``civ_dn``, ``civ_up``; the rule of the Python backend for products). That is at least
+  the next float toward -inf (+inf), at most two ulps further, in every rounding mode; the
+  exact result of a rounded operation lies within one ulp of it, so the moved bound holds
+  it. The step is that of ``nextafter`` or larger, and cheaper (two floating-point
+  operations, no moves through the integer registers). A product by a constant of the
+  instruction list takes two products instead of four (``civ_mulc``). A lower bound that
+  overflowed to +inf becomes the largest float first (an upper bound -inf the most
+  negative one).
+* libm functions (exp, log, sin, ...): a margin of ``2**-44`` relative (256 ulps) plus
+  ``2**-1060`` absolute, then one ulp; results are intersected with the range of the
+  function. ``sin``/``cos`` use the Lipschitz bound ``|sin t - sin m| <= |t - m|`` around
+  the midpoint and give ``[-1, 1]`` beyond ``|t| = 1e8`` (as the Python backend);
+  ``tan`` is ``sin / cos``.
+* Exact operations (negation, ``fabs``, ``fmin``/``fmax``, ``floor``/``ceil``, ``sign``,
+  comparisons, ``if_else``) are not widened.
+* A NaN bound means "possibly undefined": it is two-sided, it propagates through every
+  operation (``fmin``/``fmax``/comparisons included), and an operation on an operand that
+  leaves its domain (``log`` of a non-positive bound, division by an interval holding 0,
+  ...) gives it. The callers map NaN to ``[-inf, inf]``.
+
+Constants of the instruction list are exact doubles (written as C99 hexadecimal literals).
+Operations without a rule here (``erfinv``, calls of other Functions, ...) raise
+:class:`UnsupportedIntervalOp`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+__all__ = ["PRELUDE", "UnsupportedIntervalOp", "interval_function", "unsupported_ops",
+           "c_double"]
+
+
+class UnsupportedIntervalOp(ValueError):
+    """The Function holds an operation without an interval rule in C."""
+
+
+# op code -> C helper (civ -> civ, or (civ, civ) -> civ)
+_UNARY = {
+    ca.OP_ASSIGN: None, ca.OP_NEG: "civ_neg", ca.OP_SQ: "civ_sq", ca.OP_TWICE: "civ_twice",
+    ca.OP_INV: "civ_inv", ca.OP_SQRT: "civ_sqrt", ca.OP_EXP: "civ_exp", ca.OP_LOG: "civ_log",
+    ca.OP_SIN: "civ_sin", ca.OP_COS: "civ_cos", ca.OP_TAN: "civ_tan", ca.OP_ASIN: "civ_asin",
+    ca.OP_ACOS: "civ_acos", ca.OP_ATAN: "civ_atan", ca.OP_SINH: "civ_sinh",
+    ca.OP_COSH: "civ_cosh", ca.OP_TANH: "civ_tanh", ca.OP_ASINH: "civ_asinh",
+    ca.OP_ACOSH: "civ_acosh", ca.OP_ATANH: "civ_atanh", ca.OP_FABS: "civ_fabs",
+    ca.OP_FLOOR: "civ_floor", ca.OP_CEIL: "civ_ceil", ca.OP_SIGN: "civ_sign",
+    ca.OP_NOT: "civ_not", ca.OP_ERF: "civ_erf", ca.OP_LOG1P: "civ_log1p",
+    ca.OP_EXPM1: "civ_expm1",
+}
+_BINARY = {
+    ca.OP_ADD: "civ_add", ca.OP_SUB: "civ_sub", ca.OP_MUL: "civ_mul", ca.OP_DIV: "civ_div",
+    ca.OP_POW: "civ_pow", ca.OP_CONSTPOW: "civ_pow", ca.OP_ATAN2: "civ_atan2",
+    ca.OP_FMIN: "civ_fmin", ca.OP_FMAX: "civ_fmax", ca.OP_LT: "civ_lt", ca.OP_LE: "civ_le",
+    ca.OP_EQ: "civ_eq", ca.OP_NE: "civ_ne", ca.OP_AND: "civ_and", ca.OP_OR: "civ_or",
+    ca.OP_IF_ELSE_ZERO: "civ_if_else_zero", ca.OP_COPYSIGN: "civ_copysign",
+    ca.OP_FMOD: "civ_fmod", ca.OP_REMAINDER: "civ_remainder", ca.OP_HYPOT: "civ_hypot",
+}
+_STRUCTURAL = {ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT}
+
+
+def _op_name(op: int) -> str:
+    for name in dir(ca):
+        if name.startswith("OP_") and getattr(ca, name) == op:
+            return name
+    return f"op {op}"
+
+
+def c_double(v: float) -> str:
+    """C99 text of a double, exact: a hexadecimal literal, ``INFINITY``/``-INFINITY`` or
+    ``NAN``."""
+    v = float(v)
+    if math.isnan(v):
+        return "NAN"
+    if math.isinf(v):
+        return "INFINITY" if v > 0 else "-INFINITY"
+    return v.hex()
+
+
+def _as_sx(fun: ca.Function) -> ca.Function:
+    if not fun.is_a("SXFunction"):
+        try:
+            fun = fun.expand()
+        except Exception as exc:  # pragma: no cover - depends on CasADi internals
+            raise UnsupportedIntervalOp(
+                f"'{fun.name()}' is not an SX Function and cannot be expanded to one: "
+                f"{exc}") from exc
+    if fun.has_free():
+        raise UnsupportedIntervalOp(
+            f"'{fun.name()}' depends on free symbols: "
+            + ", ".join(str(v) for v in fun.get_free()))
+    return fun
+
+
+def unsupported_ops(fun: ca.Function) -> list[str]:
+    """Names of the operations of ``fun`` without an interval rule in C (empty: all have
+    one)."""
+    fun = _as_sx(fun)
+    bad = {fun.instruction_id(k) for k in range(fun.n_instructions())}
+    bad -= set(_UNARY) | set(_BINARY) | _STRUCTURAL
+    return sorted(_op_name(op) for op in bad)
+
+
+def interval_function(fun: ca.Function, name: str) -> str:
+    """C text of ``static void name(il, ih, ol, oh)``: the natural interval inclusion of the
+    SX Function ``fun``, outward rounded (see the module notes).
+
+    ``il[i]``/``ih[i]`` point to the lower/upper bounds of input ``i`` (dense, its
+    ``numel`` entries); ``ol[o]``/``oh[o]`` receive the bounds of output ``o`` (dense,
+    column-major; structural zeros are written as ``[0, 0]``). A bound may come out NaN
+    ("possibly undefined", both sides); the caller decides what that means.
+
+    Raises
+    ------
+    UnsupportedIntervalOp
+        ``fun`` holds an operation without a rule (listed in the message), or free
+        symbols, or a sparse input.
+    """
+    fun = _as_sx(fun)
+    bad = unsupported_ops(fun)
+    if bad:
+        raise UnsupportedIntervalOp(
+            f"'{fun.name()}' holds operations without an outward-rounded interval rule in the "
+            f"C export: {', '.join(bad)}")
+    for i in range(fun.n_in()):
+        if not fun.sparsity_in(i).is_dense():
+            raise UnsupportedIntervalOp(f"input {i} of '{fun.name()}' is sparse")
+    body: list[str] = []
+    used: set[int] = set()
+    for o in range(fun.n_out()):  # structural zeros of a sparse output
+        sp = fun.sparsity_out(o)
+        if not sp.is_dense():
+            body.append(f"    for (k = 0; k < {sp.numel()}; ++k) ol[{o}][k] = oh[{o}][k] = "
+                        "0.0;")
+    nz_pos = [list(fun.sparsity_out(o).find()) for o in range(fun.n_out())]
+    consts: dict[int, float] = {}  # slot -> the finite constant it holds
+    for k in range(fun.n_instructions()):
+        op = fun.instruction_id(k)
+        ins = list(fun.instruction_input(k))
+        outs = list(fun.instruction_output(k))
+        held = dict(consts)  # the constants of the operands
+        if op != ca.OP_OUTPUT:
+            consts.pop(outs[0], None)
+        if op == ca.OP_CONST:
+            v = float(fun.instruction_constant(k))
+            used.add(outs[0])
+            c = c_double(v)
+            note = f" /* {v!r} */" if math.isfinite(v) else ""
+            body.append(f"    v{outs[0]}.lo = v{outs[0]}.hi = {c};{note}")
+            if math.isfinite(v):
+                consts[outs[0]] = v
+        elif op == ca.OP_MUL and (ins[0] in held) != (ins[1] in held):
+            used.add(outs[0])
+            var, c = (ins[1], held[ins[0]]) if ins[0] in held else (ins[0], held[ins[1]])
+            body.append(f"    v{outs[0]} = civ_mulc(v{var}, {c_double(c)});")
+        elif op == ca.OP_INPUT:
+            used.add(outs[0])
+            body.append(f"    v{outs[0]}.lo = il[{ins[0]}][{ins[1]}]; "
+                        f"v{outs[0]}.hi = ih[{ins[0]}][{ins[1]}];")
+        elif op == ca.OP_OUTPUT:
+            oi, j = outs[0], nz_pos[outs[0]][outs[1]]
+            body.append(f"    ol[{oi}][{j}] = v{ins[0]}.lo; oh[{oi}][{j}] = v{ins[0]}.hi;")
+        elif op in _UNARY:
+            used.add(outs[0])
+            fn = _UNARY[op]
+            expr = f"v{ins[0]}" if fn is None else f"{fn}(v{ins[0]})"
+            body.append(f"    v{outs[0]} = {expr};")
+        else:
+            used.add(outs[0])
+            body.append(f"    v{outs[0]} = {_BINARY[op]}(v{ins[0]}, v{ins[1]});")
+    slots = sorted(used)
+    decl = []
+    if slots:
+        names = [f"v{s}" for s in slots]
+        for i in range(0, len(names), 12):
+            decl.append("    civ " + ", ".join(names[i:i + 12]) + ";")
+    if any("for (k = 0;" in b for b in body):
+        decl.append("    int k;")
+    tail = ["    " + " ".join(f"(void)v{s};" for s in slots[i:i + 12])
+            for i in range(0, len(slots), 12)]
+    return "\n".join([
+        f"/* natural interval inclusion of '{fun.name()}', outward rounded "
+        f"({fun.n_instructions()} instructions) */",
+        f"static void {name}(const double *const *il, const double *const *ih, "
+        "double *const *ol, double *const *oh) {",
+        *decl, *body,
+        "    (void)il; (void)ih; (void)ol; (void)oh;", *tail, "}", ""])
+
+
+PRELUDE = r"""
+/* ------------------------------------------------ interval arithmetic, outward rounded */
+/* An interval civ {lo, hi} holds every real its operation can take on its operands; NaN
+ * (both bounds) means "possibly undefined". +,-,*,/,sqrt move each rounded bound outward by
+ * at least one ulp; libm functions add 2^-44 relative + 2^-1060 absolute (256 ulps), then
+ * at least one ulp. */
+#if defined(__FAST_MATH__)
+#error "the interval check needs IEEE arithmetic: do not compile with -ffast-math"
+#endif
+#if defined(FLT_EVAL_METHOD) && FLT_EVAL_METHOD == 2
+#error "the interval check needs double evaluation in double precision (e.g. -mfpmath=sse)"
+#endif
+
+typedef struct { double lo, hi; } civ;
+
+#define CIV_RL 0x1p-44
+#define CIV_AL 0x1p-1060
+#define CIV_TINY 0x1p-1074
+#define CIV_PI_HI 0x1.921fb54442d19p+1      /* above pi */
+#define CIV_HALF_PI_HI 0x1.921fb54442d19p+0 /* above pi / 2 */
+#define CIV_SIN_SAFE 1e8                    /* beyond: sin, cos in [-1, 1] */
+
+/* A rounded bound v moved outward by |v| 2^-52 + 2^-1074: at least to the next float toward
+ * -inf (civ_dn) or +inf (civ_up), in every rounding mode (|v| 2^-52 >= ulp(v) for a normal v,
+ * 2^-1074 is the spacing of the subnormals). The exact result of one rounded operation lies
+ * within one ulp of v, so the moved bound holds it. An overflowed lower bound (+inf) is a
+ * finite real above the largest float: it becomes DBL_MAX first (-inf as an upper bound
+ * -DBL_MAX). NaN stays NaN, -inf (+inf) stays as a lower (upper) bound. */
+static inline double civ_dn(double v) {
+    if (v > DBL_MAX) v = DBL_MAX;
+    return v - (fabs(v) * 0x1p-52 + CIV_TINY);
+}
+
+static inline double civ_up(double v) {
+    if (v < -DBL_MAX) v = -DBL_MAX;
+    return v + (fabs(v) * 0x1p-52 + CIV_TINY);
+}
+
+/* a libm result as a lower / upper bound (an overflowed lower bound is a huge finite value) */
+static inline double civ_dnf(double v) {
+    if (v > DBL_MAX) v = DBL_MAX;
+    return civ_dn(v - (fabs(v) * CIV_RL + CIV_AL));
+}
+
+static inline double civ_upf(double v) {
+    if (v < -DBL_MAX) v = -DBL_MAX;
+    return civ_up(v + (fabs(v) * CIV_RL + CIV_AL));
+}
+
+static inline civ civ_make(double lo, double hi) {
+    civ r;
+    if (!(lo <= hi)) lo = hi = NAN; /* also a NaN bound: both sides NaN */
+    r.lo = lo;
+    r.hi = hi;
+    return r;
+}
+
+static inline civ civ_nan(void) { return civ_make(NAN, NAN); }
+static inline int civ_isnan(civ a) { return a.lo != a.lo || a.hi != a.hi; }
+static inline double civ_min(double a, double b) { return a < b ? a : b; }
+static inline double civ_max(double a, double b) { return a > b ? a : b; }
+
+/* ---- arithmetic */
+static inline civ civ_add(civ a, civ b) {
+    return civ_make(civ_dn(a.lo + b.lo), civ_up(a.hi + b.hi));
+}
+
+static inline civ civ_sub(civ a, civ b) {
+    return civ_make(civ_dn(a.lo - b.hi), civ_up(a.hi - b.lo));
+}
+
+static inline civ civ_neg(civ a) { return civ_make(-a.hi, -a.lo); }
+static inline civ civ_twice(civ a) { return civ_add(a, a); }
+
+static inline civ civ_mul(civ a, civ b) {
+    double p1 = a.lo * b.lo, p2 = a.lo * b.hi, p3 = a.hi * b.lo, p4 = a.hi * b.hi;
+    double t = p1 + p2 + p3 + p4; /* NaN when a product is NaN (or infinities cancel) */
+    if (t != t) return civ_nan();
+    return civ_make(civ_dn(civ_min(civ_min(p1, p2), civ_min(p3, p4))),
+                    civ_up(civ_max(civ_max(p1, p2), civ_max(p3, p4))));
+}
+
+/* a * c for a finite constant c (the sign test is resolved when compiled) */
+static inline civ civ_mulc(civ a, double c) {
+    if (c > 0.0) return civ_make(civ_dn(a.lo * c), civ_up(a.hi * c));
+    if (c < 0.0) return civ_make(civ_dn(a.hi * c), civ_up(a.lo * c));
+    return civ_isnan(a) ? a : civ_make(0.0, 0.0); /* 0 x = 0 for every real x */
+}
+
+static inline civ civ_div(civ a, civ b) {
+    double p1, p2, p3, p4;
+    if (!(b.lo > 0.0 || b.hi < 0.0) || civ_isnan(a)) return civ_nan();
+    p1 = a.lo / b.lo; p2 = a.lo / b.hi; p3 = a.hi / b.lo; p4 = a.hi / b.hi;
+    if (p1 != p1 || p2 != p2 || p3 != p3 || p4 != p4) return civ_nan();
+    return civ_make(civ_dn(civ_min(civ_min(p1, p2), civ_min(p3, p4))),
+                    civ_up(civ_max(civ_max(p1, p2), civ_max(p3, p4))));
+}
+
+static inline civ civ_inv(civ a) { return civ_div(civ_make(1.0, 1.0), a); }
+
+/* |a| as [mignitude, magnitude] */
+static inline civ civ_fabs(civ a) {
+    if (civ_isnan(a)) return a;
+    return civ_make(civ_max(civ_max(a.lo, -a.hi), 0.0), civ_max(-a.lo, a.hi));
+}
+
+static inline civ civ_sq(civ a) {
+    civ m = civ_fabs(a);
+    if (civ_isnan(m)) return m;
+    return civ_make(civ_max(civ_dn(m.lo * m.lo), 0.0), civ_up(m.hi * m.hi));
+}
+
+static inline civ civ_sqrt(civ a) {
+    if (!(a.lo >= 0.0) || a.hi != a.hi) return civ_nan();
+    return civ_make(civ_max(civ_dn(sqrt(a.lo)), 0.0), civ_up(sqrt(a.hi)));
+}
+
+static inline civ civ_fmin(civ a, civ b) {
+    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
+    return civ_make(civ_min(a.lo, b.lo), civ_min(a.hi, b.hi));
+}
+
+static inline civ civ_fmax(civ a, civ b) {
+    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
+    return civ_make(civ_max(a.lo, b.lo), civ_max(a.hi, b.hi));
+}
+
+/* ---- monotone libm functions: f(lo), f(hi) with the libm margin, clipped to [rlo, rhi] */
+static inline civ civ_inc(double flo, double fhi, double rlo, double rhi) {
+    if (flo != flo || fhi != fhi) return civ_nan();
+    return civ_make(civ_max(civ_dnf(flo), rlo), civ_min(civ_upf(fhi), rhi));
+}
+
+static inline civ civ_exp(civ a) { return civ_inc(exp(a.lo), exp(a.hi), 0.0, INFINITY); }
+static inline civ civ_expm1(civ a) {
+    return civ_inc(expm1(a.lo), expm1(a.hi), -1.0, INFINITY);
+}
+static inline civ civ_log(civ a) {
+    if (!(a.lo > 0.0)) return civ_nan();
+    return civ_inc(log(a.lo), log(a.hi), -INFINITY, INFINITY);
+}
+static inline civ civ_log1p(civ a) {
+    if (!(a.lo > -1.0)) return civ_nan();
+    return civ_inc(log1p(a.lo), log1p(a.hi), -INFINITY, INFINITY);
+}
+static inline civ civ_atan(civ a) {
+    return civ_inc(atan(a.lo), atan(a.hi), -CIV_HALF_PI_HI, CIV_HALF_PI_HI);
+}
+static inline civ civ_tanh(civ a) { return civ_inc(tanh(a.lo), tanh(a.hi), -1.0, 1.0); }
+static inline civ civ_erf(civ a) { return civ_inc(erf(a.lo), erf(a.hi), -1.0, 1.0); }
+static inline civ civ_sinh(civ a) {
+    return civ_inc(sinh(a.lo), sinh(a.hi), -INFINITY, INFINITY);
+}
+static inline civ civ_asinh(civ a) {
+    return civ_inc(asinh(a.lo), asinh(a.hi), -INFINITY, INFINITY);
+}
+static inline civ civ_asin(civ a) {
+    if (!(a.lo >= -1.0 && a.hi <= 1.0)) return civ_nan();
+    return civ_inc(asin(a.lo), asin(a.hi), -CIV_HALF_PI_HI, CIV_HALF_PI_HI);
+}
+static inline civ civ_acos(civ a) { /* decreasing */
+    if (!(a.lo >= -1.0 && a.hi <= 1.0)) return civ_nan();
+    return civ_inc(acos(a.hi), acos(a.lo), 0.0, CIV_PI_HI);
+}
+static inline civ civ_acosh(civ a) {
+    if (!(a.lo >= 1.0) || a.hi != a.hi) return civ_nan();
+    return civ_inc(acosh(a.lo), acosh(a.hi), 0.0, INFINITY);
+}
+static inline civ civ_atanh(civ a) {
+    if (!(a.lo > -1.0 && a.hi < 1.0)) return civ_nan();
+    return civ_inc(atanh(a.lo), atanh(a.hi), -INFINITY, INFINITY);
+}
+static inline civ civ_cosh(civ a) { /* even: cosh of [mignitude, magnitude] */
+    civ m = civ_fabs(a);
+    if (civ_isnan(m)) return m;
+    return civ_inc(cosh(m.lo), cosh(m.hi), 1.0, INFINITY);
+}
+
+/* sin, cos: |f(t) - f(m)| <= |t - m| around the midpoint m (1-Lipschitz) */
+static inline civ civ_lipschitz1(civ a, double (*f)(double)) {
+    double m, r, s;
+    if (civ_isnan(a)) return a;
+    if (!(a.lo >= -CIV_SIN_SAFE && a.hi <= CIV_SIN_SAFE)) return civ_make(-1.0, 1.0);
+    m = 0.5 * a.lo + 0.5 * a.hi;
+    r = civ_max(civ_up(m - a.lo), civ_up(a.hi - m));
+    s = f(m);
+    if (s != s) return civ_nan();
+    return civ_make(civ_max(civ_dn(civ_dnf(s) - r), -1.0), civ_min(civ_up(civ_upf(s) + r), 1.0));
+}
+
+static inline civ civ_sin(civ a) { return civ_lipschitz1(a, sin); }
+static inline civ civ_cos(civ a) { return civ_lipschitz1(a, cos); }
+static inline civ civ_tan(civ a) { return civ_div(civ_sin(a), civ_cos(a)); }
+
+/* ---- powers */
+static inline civ civ_pow_int(civ a, double n) { /* n integer, |n| < 2^31 */
+    civ m;
+    if (civ_isnan(a)) return a;
+    if (n == 0.0) return civ_make(1.0, 1.0);
+    if (n == 1.0) return a;
+    if (n == 2.0) return civ_sq(a);
+    if (n < 0.0) return civ_inv(civ_pow_int(a, -n));
+    if (fmod(n, 2.0) == 1.0) return civ_inc(pow(a.lo, n), pow(a.hi, n), -INFINITY, INFINITY);
+    m = civ_fabs(a);
+    return civ_inc(pow(m.lo, n), pow(m.hi, n), 0.0, INFINITY);
+}
+
+static inline civ civ_pow(civ a, civ b) {
+    double c = b.lo;
+    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
+    if (b.lo == b.hi && fabs(c) < 2147483648.0 && floor(c) == c) return civ_pow_int(a, c);
+    if (b.lo == b.hi && c > 0.0 && c < INFINITY) { /* increasing on [0, inf) */
+        if (!(a.lo >= 0.0)) return civ_nan();
+        return civ_inc(pow(a.lo, c), pow(a.hi, c), 0.0, INFINITY);
+    }
+    if (b.lo == b.hi && c < 0.0 && c > -INFINITY) { /* decreasing on (0, inf) */
+        if (!(a.lo > 0.0)) return civ_nan();
+        return civ_inc(pow(a.hi, c), pow(a.lo, c), 0.0, INFINITY);
+    }
+    if (!(a.lo > 0.0)) return civ_nan();
+    return civ_exp(civ_mul(b, civ_log(a)));
+}
+
+static inline civ civ_hypot(civ a, civ b) {
+    civ x = civ_fabs(a), y = civ_fabs(b);
+    if (civ_isnan(x) || civ_isnan(y)) return civ_nan();
+    return civ_inc(hypot(x.lo, y.lo), hypot(x.hi, y.hi), 0.0, INFINITY);
+}
+
+/* atan2(y, x) in [-pi, pi]: corners, or the whole range where the box meets the branch
+ * cut (the negative x axis) or the origin */
+static inline civ civ_atan2(civ y, civ x) {
+    double y0, y1, c1, c2, c3, c4;
+    civ r;
+    if (civ_isnan(y) || civ_isnan(x)) return civ_nan();
+    y0 = y.lo + 0.0;
+    y1 = y.hi + 0.0;
+    c1 = atan2(y0, x.lo); c2 = atan2(y0, x.hi); c3 = atan2(y1, x.lo); c4 = atan2(y1, x.hi);
+    r = civ_inc(civ_min(civ_min(c1, c2), civ_min(c3, c4)),
+                civ_max(civ_max(c1, c2), civ_max(c3, c4)), -CIV_PI_HI, CIV_PI_HI);
+    if (!civ_isnan(r) && ((x.lo <= 0.0 && y.lo < 0.0 && y.hi >= 0.0) ||
+                          (x.lo <= 0.0 && x.hi >= 0.0 && y.lo <= 0.0 && y.hi >= 0.0)))
+        r = civ_make(-CIV_PI_HI, CIV_PI_HI);
+    return r;
+}
+
+/* ---- piecewise operations (exact) */
+static inline civ civ_floor(civ a) {
+    if (civ_isnan(a)) return a;
+    return civ_make(floor(a.lo), floor(a.hi));
+}
+
+static inline civ civ_ceil(civ a) {
+    if (civ_isnan(a)) return a;
+    return civ_make(ceil(a.lo), ceil(a.hi));
+}
+
+static inline double civ_sgn(double v) { return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }
+
+static inline civ civ_sign(civ a) {
+    if (civ_isnan(a)) return a;
+    return civ_make(civ_sgn(a.lo), civ_sgn(a.hi));
+}
+
+static inline civ civ_copysign(civ a, civ b) {
+    civ m = civ_fabs(a);
+    if (civ_isnan(m) || civ_isnan(b)) return civ_nan();
+    if (b.lo >= 0.0) return m;
+    if (b.hi < 0.0) return civ_make(-m.hi, -m.lo);
+    return civ_make(-m.hi, m.hi);
+}
+
+/* fmod(x, y): the sign of x, magnitude below |y| */
+static inline civ civ_fmod(civ a, civ b) {
+    civ m;
+    if (civ_isnan(a) || civ_isnan(b) || (b.lo <= 0.0 && b.hi >= 0.0)) return civ_nan();
+    m = civ_fabs(b);
+    if ((a.lo >= 0.0 && a.hi < m.lo) || (a.hi <= 0.0 && -a.lo < m.lo)) return a;
+    return civ_make(a.lo >= 0.0 ? 0.0 : civ_max(a.lo, -m.hi),
+                    a.hi <= 0.0 ? 0.0 : civ_min(a.hi, m.hi));
+}
+
+/* IEEE remainder(x, y): x itself when |x| <= |y| / 2, else magnitude below min(|x|, |y|/2) */
+static inline civ civ_remainder(civ a, civ b) {
+    civ m;
+    double half, xm, bound;
+    if (civ_isnan(a) || civ_isnan(b) || (b.lo <= 0.0 && b.hi >= 0.0)) return civ_nan();
+    m = civ_fabs(b);
+    if (-2.0 * a.lo <= m.lo && 2.0 * a.hi <= m.lo) return a;
+    half = m.hi * 0.5 + CIV_TINY;
+    xm = civ_max(-a.lo, a.hi);
+    bound = civ_min(half, xm);
+    return civ_make(-bound, bound);
+}
+
+/* ---- comparisons and logic: [1, 1] surely true, [0, 0] surely false, else [0, 1] */
+static inline civ civ_bool(civ a, civ b, int sure_true, int sure_false) {
+    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
+    return civ_make(sure_true ? 1.0 : 0.0, sure_false ? 0.0 : 1.0);
+}
+
+static inline int civ_thin_equal(civ a, civ b) {
+    return a.lo == a.hi && b.lo == b.hi && a.lo == b.lo;
+}
+
+static inline int civ_nonzero(civ a) { return a.lo > 0.0 || a.hi < 0.0; }
+static inline int civ_zero(civ a) { return a.lo == 0.0 && a.hi == 0.0; }
+
+static inline civ civ_lt(civ a, civ b) { return civ_bool(a, b, a.hi < b.lo, a.lo >= b.hi); }
+static inline civ civ_le(civ a, civ b) { return civ_bool(a, b, a.hi <= b.lo, a.lo > b.hi); }
+static inline civ civ_eq(civ a, civ b) {
+    return civ_bool(a, b, civ_thin_equal(a, b), a.hi < b.lo || a.lo > b.hi);
+}
+static inline civ civ_ne(civ a, civ b) {
+    return civ_bool(a, b, a.hi < b.lo || a.lo > b.hi, civ_thin_equal(a, b));
+}
+static inline civ civ_not(civ a) { return civ_bool(a, a, civ_zero(a), civ_nonzero(a)); }
+static inline civ civ_and(civ a, civ b) {
+    return civ_bool(a, b, civ_nonzero(a) && civ_nonzero(b), civ_zero(a) || civ_zero(b));
+}
+static inline civ civ_or(civ a, civ b) {
+    return civ_bool(a, b, civ_nonzero(a) || civ_nonzero(b), civ_zero(a) && civ_zero(b));
+}
+
+/* c ? x : 0 */
+static inline civ civ_if_else_zero(civ c, civ x) {
+    if (civ_isnan(c) || civ_isnan(x)) return civ_nan();
+    if (civ_nonzero(c)) return x;
+    if (civ_zero(c)) return civ_make(0.0, 0.0);
+    return civ_make(civ_min(x.lo, 0.0), civ_max(x.hi, 0.0));
+}
+"""
