@@ -1,27 +1,49 @@
-"""Exact one-step (pre-)sets and controllable-set sequences of linear models (thesis §3.4).
+"""One-step (pre-)sets and controllable-set sequences of linear models (thesis §3.4).
 
 For ``x+ = A x + B u + E w + c`` with ``u`` in the box U and ``w`` in the box W,
 
     Pre(T) = {x : exists u in U such that A x + B u + E w + c in T for all w in W}
 
-is computed exactly for a polytope ``T = {y : H y <= h}`` as the projection onto x of the
-lifted polytope ``{(x, u) : H (A x + B u + c) <= h - max_{w in W} H E w, u in U}``
-(Pontryagin difference for the disturbance). For a union of polytopes without disturbance,
-``Pre(T_1 ∪ ... ∪ T_p) = Pre(T_1) ∪ ... ∪ Pre(T_p)`` exactly.
+is, for a polytope ``T = {y : H y <= h}``, ``{x : A x ∈ S}`` with
+``S = (T ⊖ E W) - c ⊕ (-B U)`` (the Pontryagin difference for the disturbance is exact
+row by row for a box W; the Minkowski sum with the box image ``-B U`` is one segment per
+input). :func:`pre_set` computes it in rational arithmetic (Fourier–Motzkin elimination
+of each segment parameter, redundant rows dropped only with an exactly checked
+certificate) and stores it as a float polytope rounded *inward*: every point of the
+returned set is proven one-step controllable. For a union of polytopes
+without disturbance, ``Pre(T_1 ∪ ... ∪ T_p) = Pre(T_1) ∪ ... ∪ Pre(T_p)``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
 
-from ..exceptions import ModelError
+from ..exceptions import ModelError, SolverError, UnboundedSetError
 from ..model import Model
+from ..sets._exact import (
+    ExactRow,
+    exact_max,
+    exact_row,
+    fm_eliminate,
+    frac_down,
+    frac_up,
+    lp_feasible,
+    prune_rows,
+    reduce_rows,
+    round_rows_inward,
+)
 from ..sets.polytope import Polytope, PolytopeUnion
 
 __all__ = ["pre_set", "linear_controllable_sets", "SetSequence"]
+
+#: Largest inward move of a row while dropping rows that are redundant only up to a
+#: margin (tiny facets that exact arithmetic finds where floating point sees one vertex),
+#: relative to the scale of the coordinates (see ``reduce_rows``).
+_SHRINK = 1e-12
 
 
 def _check_linear(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -29,40 +51,207 @@ def _check_linear(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
     if not model.is_linear:
         raise ModelError(
-            f"pre_set computes exact pre-sets of linear models only; model '{model.name}' is "
+            f"pre_set computes pre-sets of linear models only; model '{model.name}' is "
             "nonlinear (use the interval-based one-step sets for nonlinear models)")
     return model.linear_matrices()
 
 
-def _pre_polytope(model: Model, T: Polytope, within_X: bool) -> Polytope:
+def _fr(M: np.ndarray) -> list:
+    """Floats (any shape) as nested lists of exact Fractions."""
+    return np.vectorize(lambda v: Fraction(float(v)), otypes=[object])(
+        np.asarray(M, dtype=float)).tolist()
+
+
+def _box_rows(lo: list[Fraction], hi: list[Fraction]) -> list[ExactRow]:
+    """Exact rows ``z_j <= hi_j``, ``-z_j <= -lo_j`` of a box."""
+    out = []
+    for j, (bl, bh) in enumerate(zip(lo, hi, strict=True)):
+        e = [0] * len(lo)
+        e[j] = 1
+        out.append(exact_row(e, bh))
+        e[j] = -1
+        out.append(exact_row(e, -bl))
+    return out
+
+
+def _image_box(M: list[list[Fraction]], lo: list[Fraction], hi: list[Fraction]
+               ) -> tuple[list[Fraction], list[Fraction]]:
+    """Exact interval hull ``[lo', hi']`` of ``{M z : z in [lo, hi]}``."""
+    zero = Fraction(0)
+    blo = [sum((min(v * a, v * b) for v, a, b in zip(row, lo, hi, strict=True)), zero)
+           for row in M]
+    bhi = [sum((max(v * a, v * b) for v, a, b in zip(row, lo, hi, strict=True)), zero)
+           for row in M]
+    return blo, bhi
+
+
+def _pre_rows(model: Model, H: np.ndarray, h: np.ndarray, within_X: bool
+              ) -> list[ExactRow] | None:
+    """Exact rows in x of ``{x (in X) : A x ∈ S}``, ``S = (T ⊖ E W) - c ⊕ (-B U)``
+    (None: empty; the rows of X are not included).
+
+    ``T ⊖ E W`` is exact row by row for the box W; ``S`` is built by one Minkowski sum
+    with a segment per input, ``S_j = S_{j-1} ⊕ G_j``, ``G_j = -b_j [lo_j, hi_j]``, i.e.
+    ``{y : exists t in [lo_j, hi_j], y + b_j t in S_{j-1}}``, each an exact
+    Fourier–Motzkin elimination of t in n + 1 coordinates with the redundant rows pruned
+    (certified). Then ``Pre(T) = {x : A x ∈ S}`` (rows ``a A``), for any A. With
+    ``within_X``, each ``S_j`` is intersected with a box ``Y_j`` (exact) without changing
+    the result: ``Y_m ⊇ A X`` and ``Y_{j-1} = Y_j ⊕ (-G_j)``, so that a point of
+    ``S_m ∩ Y_m`` is ``s + g`` with ``s = y - g`` in ``S_{m-1} ∩ Y_{m-1}``; the box rows
+    keep every stage bounded and let nearly parallel rows be proven redundant.
+    """
     A, B, E, c = _check_linear(model)
-    n, m = model.n, model.m
+    n, m, nl = model.n, model.m, model.l
+    Af, Bf, Ef, cf = _fr(A), _fr(B.reshape(n, m)), _fr(E.reshape(n, nl)), _fr(c)
+    zero = Fraction(0)
+    rows: list[ExactRow] = []
+    for Hi_f, hi_f in zip(_fr(H), _fr(h), strict=True):
+        beta = hi_f - sum((Hi_f[k] * cf[k] for k in range(n)), zero)
+        if nl:
+            W = model.W
+            for j, (wl, wh) in enumerate(zip(_fr(W.lo), _fr(W.hi), strict=True)):
+                he = sum((Hi_f[k] * Ef[k][j] for k in range(n)), zero)
+                beta -= max(he * wl, he * wh)
+        rows.append(exact_row(Hi_f, beta))
+    Ulo, Uhi = _fr(model.U.lo), _fr(model.U.hi)
+    # stage boxes Y_m ⊇ A X, Y_{j-1} = Y_j ⊕ b_j [lo_j, hi_j]
+    Ylo, Yhi = _image_box(Af, _fr(model.X.lo), _fr(model.X.hi))
+    boxes = [(Ylo, Yhi)]
+    for j in range(m - 1, -1, -1):
+        glo, ghi = _image_box([[Bf[k][j]] for k in range(n)], [Ulo[j]], [Uhi[j]])
+        Ylo = [a + b for a, b in zip(Ylo, glo, strict=True)]
+        Yhi = [a + b for a, b in zip(Yhi, ghi, strict=True)]
+        boxes.insert(0, (Ylo, Yhi))
+    # the LPs are conditioned by the scale of y over X x U
+    slo = np.array([float(v) for v in boxes[0][0]])
+    shi = np.array([float(v) for v in boxes[0][1]])
+
+    def stage(rows: list[ExactRow], j: int) -> list[ExactRow] | None:
+        """Rows of (an inner approximation of) S_j ∩ Y_j, pruned; with the box Y_j the
+        normals are rounded to floats (offsets moved inward to pay for it) so that the
+        integers of the next stages stay short."""
+        if not within_X:
+            return reduce_rows(rows, slo, shi, shrink=_SHRINK)
+        pinned = _box_rows(*boxes[j])
+        out = reduce_rows(rows + pinned, slo, shi, removable=range(len(rows)),
+                          shrink=_SHRINK)
+        if out is None:
+            return None
+        box = set(pinned)
+        free = [r for r in out if r not in box]
+        A_f, b_f = round_rows_inward(free, *boxes[j])
+        if np.any(b_f == -np.inf):
+            return None
+        return [exact_row(_fr(a), Fraction(float(b))) for a, b in zip(A_f, b_f, strict=True)
+                if np.isfinite(b)] + [r for r in out if r in box]
+
+    if not lp_feasible(rows + (_box_rows(*boxes[0]) if within_X else []), slo, shi):
+        return None
+    cur = stage(rows, 0)
+    for j in range(m):
+        if cur is None:
+            return None
+        bj = [Bf[k][j] for k in range(n)]
+        if not any(bj):
+            continue
+        lifted = [exact_row(list(a) + [sum((ak * bk for ak, bk in zip(a, bj, strict=True)),
+                                           zero)], beta) for a, beta in cur]
+        lifted += [exact_row([0] * n + [1], Uhi[j]), exact_row([0] * n + [-1], -Ulo[j])]
+        cur = stage(fm_eliminate(lifted, n), j + 1)
+    if cur is None:
+        return None
+    if within_X:  # the rows of Y_m are implied by x in X
+        drop = set(_box_rows(*boxes[m]))
+        cur = [r for r in cur if r not in drop]
+    return [exact_row([sum((Fraction(a[k]) * Af[k][j] for k in range(n)), zero)
+                       for j in range(n)], beta) for a, beta in cur]
+
+
+def _pre_polytope(model: Model, T: Polytope, within_X: bool) -> Polytope:
+    """Inner float polytope of the exact Pre(T) (∩ X) of one target polytope."""
+    _check_linear(model)
+    n = model.n
     if T.dim != n:
         raise ValueError(f"target has dimension {T.dim}; the model has n = {n}")
-    H, h = np.asarray(T.A), np.asarray(T.b)
-    if model.l:
-        # tighten by the support of E W in each row direction (exact for boxes)
-        HE = H @ E
-        W = model.W
-        h = h - np.maximum(HE * W.lo, HE * W.hi).sum(axis=1)
-    rows = [np.hstack([H @ A, H @ B])]
-    rhs = [h - H @ c]
-    if m:
-        eye = np.eye(m)
-        rows += [np.hstack([np.zeros((m, n)), eye]), np.hstack([np.zeros((m, n)), -eye])]
-        rhs += [model.U.hi, -model.U.lo]
+    H, h = np.asarray(T.A, dtype=float), np.asarray(T.b, dtype=float)
+    if np.any(h == -np.inf):
+        return Polytope.empty(n)
+    fin = np.isfinite(h)
+    rows = _pre_rows(model, H[fin], h[fin], within_X)
+    if rows is None:
+        # empty (up to HiGHS's tolerance): the empty set is an inner approximation
+        return Polytope.empty(n)
     if within_X:
-        eye = np.eye(n)
-        rows += [np.hstack([eye, np.zeros((n, m))]), np.hstack([-eye, np.zeros((n, m))])]
-        rhs += [model.X.hi, -model.X.lo]
-    lifted = Polytope(np.vstack(rows), np.concatenate(rhs))
-    if m == 0:
-        return lifted.minimal()
-    return lifted.project(list(range(n))).minimal()
+        for j, (bl, bh) in enumerate(zip(_fr(model.X.lo), _fr(model.X.hi), strict=True)):
+            e = [0] * n
+            e[j] = 1
+            rows.append(exact_row(e, bh))
+            e[j] = -1
+            rows.append(exact_row(e, -bl))
+    if not lp_feasible(rows, model.X.lo, model.X.hi):
+        return Polytope.empty(n)
+    rows = reduce_rows(rows, model.X.lo, model.X.hi, shrink=_SHRINK)
+    if rows is None:
+        return Polytope.empty(n)
+    if not rows:  # no constraint left (only without X): all of R^n
+        return Polytope(np.zeros((0, n)), np.zeros(0))
+    return _round_inward(rows, model, within_X)
+
+
+def _round_inward(rows: list[ExactRow], model: Model, within_X: bool) -> Polytope:
+    """The float polytope ``{x in B : A_f x <= b_f}`` inside the exact rows' set, with B
+    the box X (``within_X``) or a proven bounding box of the exact set in the coordinates
+    where some normal is not a float vector."""
+    n = model.n
+    inexact = set()
+    for a, _ in rows:
+        M = max(abs(v) for v in a)
+        if M:
+            inexact.update(j for j, v in enumerate(a) if Fraction(v, M) != Fraction(v / M))
+    if within_X:
+        blo, bhi = list(model.X.lo), list(model.X.hi)
+    else:
+        blo, bhi = [-np.inf] * n, [np.inf] * n
+        for j in sorted(inexact):
+            e = [0] * n
+            e[j] = 1
+            up = exact_max(rows, e, model.X.lo, model.X.hi)
+            e[j] = -1
+            dn = exact_max(rows, e, model.X.lo, model.X.hi)
+            if up is None or dn is None:
+                raise UnboundedSetError(
+                    f"the pre-set without X has no proven bound in x{j + 1} and its rows "
+                    "cannot be stored exactly in floating point; use within_X=True")
+            blo[j], bhi[j] = frac_down(-dn), frac_up(up)
+    Lo = [Fraction(float(v)) if np.isfinite(v) else None for v in blo]
+    Hi = [Fraction(float(v)) if np.isfinite(v) else None for v in bhi]
+    A_f, b_f = round_rows_inward(rows, Lo, Hi)
+    box_A, box_b = [], []
+    for j in range(n):
+        if Lo[j] is not None and Hi[j] is not None:
+            e = np.zeros(n)
+            e[j] = 1.0
+            box_A += [e, -e]
+            box_b += [float(Hi[j]), -float(Lo[j])]
+    if box_A:
+        A_f = np.vstack([A_f, np.array(box_A)])
+        b_f = np.concatenate([b_f, np.array(box_b)])
+    if np.any(b_f == -np.inf):
+        return Polytope.empty(n)
+    # drop box rows implied by the others (exactly: the set does not change)
+    frows = [exact_row(_fr(a), Fraction(float(b))) for a, b in zip(A_f, b_f, strict=True)]
+    k0 = len(rows)
+    keep = prune_rows(frows, model.X.lo, model.X.hi, removable=range(k0, len(frows)))
+    if keep is None:  # pragma: no cover - the rounded rows prove emptiness
+        return Polytope.empty(n)
+    if not keep:
+        raise SolverError("the pre-set lost every row in the rounding")  # pragma: no cover
+    return Polytope(A_f[keep], b_f[keep])
 
 
 def pre_set(model: Model, target: Any, within_X: bool = True) -> Polytope | PolytopeUnion:
-    """Exact one-step controllable set of a linear model to a target polytope or union.
+    """Proven inner approximation, tight up to rounding, of the one-step controllable set
+    of a linear model to a target polytope or union.
 
     Parameters
     ----------
@@ -76,13 +265,43 @@ def pre_set(model: Model, target: Any, within_X: bool = True) -> Polytope | Poly
     Returns
     -------
     Polytope or PolytopeUnion
-        ``{x in X : exists u in U, A x + B u + E w + c in T for all w in W}``; for a union
-        target, the union of the members' pre-sets (empty members dropped).
+        A float polytope ``K = {x : K.A x <= K.b}`` (for a union target, the union of the
+        members' sets, members proven empty dropped). What is proven, with K's stored
+        rows, T's rows, the boxes and ``(A, B, E, c) = model.linear_matrices()`` all
+        taken as exact numbers: every x in K (and in X) has a u in U with
+        ``A x + B u + E w + c`` in T for every w in W. So ``K ⊆ Pre(T) (∩ X)``; K is
+        empty when HiGHS finds the problem infeasible.
 
     Raises
     ------
     ModelError
         The model is not linear, or a union target is given for a model with disturbance.
+    UnboundedSetError
+        ``within_X=False`` and the pre-set has no proven bound in a coordinate where one
+        of its facet normals is not a float vector (then it cannot be stored as an inner
+        float polytope).
+
+    Notes
+    -----
+    The computation is exact except where it moves rows inward. ``Pre(T) = {x : A x ∈
+    S}`` with ``S = (T ⊖ E W) - c ⊕ (-B U)``: the disturbance tightening
+    ``max_{w in W} (H E w)_i`` is exact row by row; the Minkowski sum adds one segment
+    ``-b_j [lo_j, hi_j]`` per input by exact Fourier–Motzkin elimination in n + 1
+    coordinates (rational rows). After each step, rows are dropped as redundant only with
+    an exactly checked certificate (LP multipliers from HiGHS, see
+    :func:`casadi_cmpc.sets._exact.reduce_rows`). Rows are moved inward (never outward)
+    in three places, each time by about 1e-12 of the scale of X and ``A X + B U`` or
+    less (rows scaled to largest coefficient 1): (1) a row that is redundant only up to
+    a margin (tiny facets that exact arithmetic finds where floating point sees one
+    vertex) is dropped after the rows of its certificate are moved inward to close the
+    margin, each row by at most ``1e-12`` of the scale in total; (2) with ``within_X``,
+    after each segment the normals are rounded to floats and the offsets lowered by the
+    rounding error over a box that holds the intermediate set (the coefficients stay
+    short); (3) the result's normals are rounded to floats and the offsets lowered by
+    ``max_{x in B} (a - a_f).x`` and rounded down, over ``B = X`` (or a proven bounding
+    box without X), whose rows are kept unless proven redundant. A set thinner than
+    these moves may come out empty. ``K.contains`` is a floating-point test of the
+    rows: a point it accepts on the boundary may lie outside K by a rounding error.
     """
     if isinstance(target, PolytopeUnion):
         if model.l:
@@ -106,7 +325,9 @@ class SetSequence:
     sets : list
         ``sets[i]`` is K_i (``sets[0]`` is the target); also ``seq[i]``.
     converged_at : int or None
-        The first i with K_i = K_{i-1} (the maximal controllable set reached), else None.
+        The first i with K_i = K_{i-1} (the maximal controllable set reached), else None;
+        for :func:`linear_controllable_sets`, equal up to the tolerance of LP inclusion
+        tests.
     status : str
         ``"converged"``, ``"max_steps"`` (the recursion stopped at ``max_steps``),
         ``"until"`` (the given states were reached), ``"budget"`` (a step ran out of budget:
@@ -366,7 +587,9 @@ _register()
 
 
 def _same_set(S1: Any, S2: Any) -> bool:
-    """Exact equality test of two polytopes or unions of polytopes."""
+    """Equality of two polytopes or unions of polytopes, member by member, by LP
+    inclusion tests (:meth:`Polytope.is_subset`, which errs toward True by its
+    tolerance): a convergence test, not a proof."""
     if isinstance(S1, Polytope) and isinstance(S2, Polytope):
         return S1.is_subset(S2) and S2.is_subset(S1)
     m1 = S1.polytopes if isinstance(S1, PolytopeUnion) else (S1,)
@@ -379,6 +602,11 @@ def _same_set(S1: Any, S2: Any) -> bool:
 def linear_controllable_sets(model: Model, target: Any, max_steps: int = 50,
                              until: Any = None) -> SetSequence:
     """The recursion K_{i+1} = Pre(K_i) ∩ X of a linear model (thesis §3.4).
+
+    Each K_{i+1} is :func:`pre_set` of the computed K_i, a proven inner approximation:
+    every state of K_{i+1} has an input in U that brings it into K_i for every w in W,
+    exactly (so into T in i + 1 steps); the sets are the exact ones up to the inward moves
+    described in :func:`pre_set`.
 
     Parameters
     ----------
@@ -394,9 +622,19 @@ def linear_controllable_sets(model: Model, target: Any, max_steps: int = 50,
     Returns
     -------
     SetSequence
-        ``converged_at`` is set when K_i equals K_{i-1} (exact comparison member by member).
+        ``info`` records the model, ``robust`` (the model has a disturbance: every w in
+        W), ``semantics`` and ``method``. ``converged_at`` is set when K_i equals
+        K_{i-1} up to the tolerance of the LP inclusion tests, member by member (a
+        stopping rule: it does not prove that K_{i-1} is control invariant).
     """
-    seq = SetSequence(sets=[target])
+    from .controllable import NO_W, ROBUST
+
+    _check_linear(model)
+    seq = SetSequence(sets=[target], info={
+        "model": model.name, "robust": bool(model.l),
+        "semantics": ROBUST if model.l else NO_W,
+        "method": "pre_set: exact rational pre-sets, rows rounded inward (inner sets)",
+        "state_names": [f"x{i + 1}" for i in range(model.n)]})
     pts = None if until is None else np.atleast_2d(np.asarray(until, dtype=float))
     for i in range(1, int(max_steps) + 1):
         K = pre_set(model, seq.sets[-1])
