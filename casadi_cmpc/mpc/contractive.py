@@ -68,7 +68,9 @@ class MPCResult(Result):
     cost : float
         Value of (4.22) at ``u_seq`` (NaN when there is no sequence).
     horizon : int or None
-        Horizon ``N`` used.
+        Horizon ``N`` of ``u_seq`` and ``x_pred`` (everything in the result belongs to
+        it); when a horizon search ends without a verified sequence, the last horizon
+        tried.
     certificate : Certificate
     stats : dict
         ``solver`` (name), ``solve_time`` (s, the local solver), ``verify_time`` (s),
@@ -1001,17 +1003,27 @@ class ContractiveMPC:
         return self._unverified(x, N, u, stats, details, proofs, t0)
 
     def _search_horizon(self, x: np.ndarray, r0: float, t0: float) -> MPCResult:
+        """Alg 4.5: the horizons ``horizon_min..horizon_max`` in turn; a horizon is left
+        only when it is proven infeasible (or without proofs: ``search="never"`` or
+        ``verify=False``).
+
+        What is computed at one horizon (local sequence, solver statistics, check details)
+        is used only at that horizon: the result reports the horizon its sequence belongs
+        to. When the search ends without a verified sequence, that is the last horizon
+        tried, with its own local sequence, or else the fallback of that horizon
+        (:meth:`_fallback`); the proofs of all horizons tried are attached.
+        """
         proofs: list[dict] = []
         tried: list[int] = []
-        last_u, last_stats, last_details = None, {}, {}
+        u: np.ndarray | None = None
+        stats: dict = {}
+        details: dict = {}
         for N in range(self.horizon_min, self.horizon_max + 1):
             tried.append(N)
             u, ok, stats, details = self._attempt(x, r0, N)
             stats["horizons_tried"] = list(tried)
             if ok:
                 return self._verified(x, N, u, stats, details, t0, proofs)
-            if u is not None:
-                last_u, last_stats, last_details = u, stats, details
             if self.search == "never" or not self.verify:
                 continue
             found, proof = self._prove(x, r0, N, stats)
@@ -1020,12 +1032,17 @@ class ContractiveMPC:
                 return self._verified(x, N, found, stats, proof.get("details", {}), t0,
                                       proofs)
             if proof["result"] != "infeasible":
-                stats["horizons_tried"] = list(tried)
-                return self._unverified(x, N, u if u is not None else last_u, stats,
-                                        details, proofs, t0)
+                return self._unverified(x, N, u, stats, details, proofs, t0)
         if self.search == "never" or not self.verify:
-            return self._unverified(x, tried[-1], last_u, last_stats, last_details, proofs, t0)
-        return self._infeasible(x, tried, last_u, last_stats, proofs, t0)
+            return self._unverified(x, tried[-1], u, stats, details, proofs, t0)
+        return self._infeasible(x, tried, u, stats, proofs, t0)
+
+    def _sequence(self, N: int, u: np.ndarray | None) -> None:
+        """Refuse a sequence that does not belong to horizon N (shape (N, m))."""
+        if u is not None and np.shape(u) != (N, self.model.m):
+            raise RuntimeError(
+                f"internal error: a control sequence of shape {np.shape(u)} was about to be "
+                f"used at horizon {N} (shape ({N}, {self.model.m}) expected)")
 
     # set inversion over U^N -------------------------------------------------------
     def _prove(self, x: np.ndarray, r0: float, N: int, stats: dict
@@ -1152,6 +1169,7 @@ class ContractiveMPC:
 
     def _verified(self, x: np.ndarray, N: int, u: np.ndarray, stats: dict, details: dict,
                   t0: float, proofs: list[dict]) -> MPCResult:
+        self._sequence(N, u)
         self._warm[N] = u.copy()
         details = dict(details)
         x_mid = details.pop("_x_mid", None)
@@ -1190,7 +1208,8 @@ class ContractiveMPC:
 
     def _fallback(self, x: np.ndarray, N: int, u: np.ndarray | None) -> np.ndarray:
         """The sequence applied when nothing is verified: the local solution, or the tail
-        of the last verified sequence, or u_ref (all clipped into U)."""
+        of the last verified sequence, or u_ref (all clipped into U); shape (N, m)."""
+        self._sequence(N, u)
         if u is not None:
             return u
         warm = self._warm.get(N)
@@ -1216,7 +1235,8 @@ class ContractiveMPC:
             details["proofs"] = proofs
         cert = Certificate(label, None, f"a feasible sequence exists at horizon {N}",
                            reason, details)
-        status = Status.BUDGET if budget else (Status.UNDECIDED if u is not None
+        # NUMERICAL only when the local solver failed and no search ran at this horizon
+        status = Status.BUDGET if budget else (Status.UNDECIDED if u is not None or undecided
                                                else Status.NUMERICAL)
         return MPCResult(status=status, message=reason or label,
                          method=f"contractive_mpc/{self.solver}",
