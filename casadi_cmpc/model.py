@@ -16,7 +16,7 @@ from .exceptions import (
     UnboundedSetError,
     UnsupportedOperationError,
 )
-from .interval._derivative import JacobianInclusion, ParamGraph
+from .interval._derivative import JacobianInclusion, ParamFunction, ParamGraph, exact_function
 from .interval.compiler import InclusionFunction, inclusion
 from .sets.box import Box
 
@@ -185,6 +185,11 @@ class Model:
         self.W = _as_model_box(W, w.numel(), "W") if w is not None else None
         self.law: ca.SX | None = None  # set by closed_loop
         self.input_box: Box | None = None  # U of the open-loop model, set by closed_loop
+        # closed loops: f(x, law(x), w) in x, w and parameter symbols standing for the
+        # literals of f and the law, with their values (see interval_function); None for a
+        # model given by its expressions
+        self._exact_f: ca.SX | None = None
+        self._exact_params: tuple[ca.SX, np.ndarray] | None = None
         self._cache: dict[Any, Any] = {}
 
     # ------------------------------------------------------------------ sizes
@@ -224,6 +229,78 @@ class Model:
         return self._cached("function", lambda: ca.Function(
             f"{self.name}_f", [self.x, self.u, self._w_sym], [self.f],
             ["x", "u", "w"], ["x_next"]))
+
+    @property
+    def interval_function(self) -> ca.Function | ParamFunction:
+        """The successor ``(x, u, w) -> x_next`` that interval evaluators are compiled from.
+
+        For a model given by its expressions this is :attr:`function`. For a closed loop
+        (:meth:`closed_loop`) it is a :class:`~casadi_cmpc.interval._derivative.ParamFunction`:
+        the open-loop f composed with the law, every literal constant of both kept as an
+        exact parameter. CasADi folds the constant subexpressions of ``f(x, law(x), w)`` in
+        floating point (``exp(u + 0.1)`` with ``u = 0`` becomes ``fl(exp(0.1))``), so
+        :attr:`f` and :attr:`function` of a closed loop hold a rounded model, fine for
+        :meth:`step` but not for a proof; :meth:`inclusion`, :meth:`jacobian_inclusion` and
+        the structure tests use this exact form. Constants that CasADi creates while
+        composing (``a - a`` gives 0, then ``acos(0)`` is folded) are widened.
+        """
+        return self.interval_map("xuw")
+
+    def interval_map(self, inputs: str = "xuw", joined: bool = False
+                     ) -> ca.Function | ParamFunction:
+        """The successor as a function of some of ``x``, ``u``, ``w``, for interval evaluators.
+
+        Solvers that compile an interval evaluator of the successor should take it from
+        here rather than build a Function from :attr:`f`, which of a closed loop is rounded
+        (see :attr:`interval_function`).
+
+        Parameters
+        ----------
+        inputs : str
+            The inputs in order, e.g. ``"xuw"`` (default, see :attr:`interval_function`),
+            ``"xw"`` or ``"x"``; a variable left out must have size 0 (``"x"`` for an
+            autonomous model without disturbance).
+        joined : bool
+            One input, the chosen variables stacked (e.g. ``(n + l, 1)`` for ``"xw"``),
+            instead of one input per variable.
+
+        Returns
+        -------
+        casadi.Function or ParamFunction
+            Inputs of shapes (n, 1), (m, 1), (l, 1) as chosen (or their stack), one output
+            (n, 1). Literal constants are exact (of a closed loop: those of f and of the
+            law; see :attr:`interval_function`). Accepted by
+            :class:`~casadi_cmpc.interval.InclusionFunction`,
+            :func:`~casadi_cmpc.interval.inclusion` and
+            :class:`~casadi_cmpc.interval._derivative.JacobianInclusion`.
+        """
+        key = str(inputs).lower()
+        if not key or any(k not in _WRT for k in key) or list(key) != sorted(
+                set(key), key=_WRT.index):
+            raise ValueError(f"inputs must list some of x, u, w in this order, each once; "
+                             f"got '{inputs}'")
+        size = {"x": self.n, "u": self.m, "w": self.l}
+        left = [k for k in _WRT if k not in key and size[k] > 0]
+        if left:
+            raise ModelError(f"model '{self.name}' depends on {', '.join(left)}: the interval "
+                             f"map must take {', '.join(left)} as input(s)")
+        joined = bool(joined)
+        if key == "xuw" and not joined and self._exact_f is None:
+            return self.function
+
+        def build() -> ca.Function | ParamFunction:
+            sym = {"x": self.x, "u": self.u, "w": self._w_sym}
+            ins = [sym[k] for k in key]
+            names = list(key)
+            if joined:
+                ins, names = [ca.vertcat(*ins)], [key]
+            name = f"{self.name}_{key}"
+            if self._exact_f is None:
+                return ca.Function(name, ins, [self.f], names, ["x_next"])
+            assert self._exact_params is not None
+            return exact_function(name, ins, [self._exact_f], *self._exact_params)
+
+        return self._cached(("interval_map", key, joined), build)
 
     def jacobian_function(self, wrt: str) -> ca.Function:
         """CasADi Function ``(x, u, w) -> df/d<wrt>`` (dense, shape (n, d_wrt))."""
@@ -294,7 +371,7 @@ class Model:
         kind = str(kind).lower()
         backend = str(backend).lower()
         F = self._cached(("inclusion", kind, backend),
-                         lambda: inclusion(self.function, kind, backend=backend))
+                         lambda: inclusion(self.interval_function, kind, backend=backend))
         return _ModelInclusion(self, F)
 
     def jacobian_inclusion(self, wrt: str = "x",
@@ -316,7 +393,8 @@ class Model:
             boxes where ``f_i`` may jump or leave its domain (floor, sign, comparisons,
             if_else, fmod, remainder, copysign, atan2's branch cut, poles such as ``1/x``
             across 0): CasADi's derivative of a jump (e.g. 0 for floor) says nothing there.
-            Literal constants of f enter exactly; constants created by differentiation are
+            Literal constants of f enter exactly (of a closed loop: those of f and of the
+            law, see :attr:`interval_function`); constants created by differentiation are
             widened.
         """
         wrt = _check_wrt(wrt)
@@ -325,7 +403,7 @@ class Model:
             raise ValueError(f"jacobian_inclusion supports kind='natural' only; got '{kind}'")
         idx = _WRT.index(wrt)
         F = self._cached(("jac_inclusion", wrt),
-                         lambda: JacobianInclusion(self.function, wrt=idx))
+                         lambda: JacobianInclusion(self.interval_function, wrt=idx))
         d = {"x": self.n, "u": self.m, "w": self.l}[wrt]
 
         def J(X: Any, U: Any = None, W: Any = None) -> np.ndarray:
@@ -337,8 +415,18 @@ class Model:
 
     # --------------------------------------------------------------- structure
     def _jac(self, wrt: str) -> ca.SX:
+        """df/d<wrt> of :attr:`f` (numeric coefficients)."""
         sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
         return self._cached(("jac_sx", wrt), lambda: ca.jacobian(self.f, sym))
+
+    def _sjac(self, wrt: str) -> ca.SX:
+        """df/d<wrt> for the structure tests: of the exact form of a closed loop (its
+        parameters as symbols, so that no dependence is hidden by a folded constant), of
+        :attr:`f` otherwise."""
+        if self._exact_f is None:
+            return self._jac(wrt)
+        sym = {"x": self.x, "u": self.u, "w": self._w_sym}[wrt]
+        return self._cached(("sjac_sx", wrt), lambda: ca.jacobian(self._exact_f, sym))
 
     def _jump_inputs(self) -> tuple[bool, bool, bool, tuple[int, ...]]:
         """Whether an operation of f that may jump or has a pole (floor, sign, comparisons,
@@ -349,7 +437,7 @@ class Model:
         nonlinearly."""
         def build() -> tuple[bool, bool, bool, tuple[int, ...]]:
             try:
-                pg = ParamGraph(self.function)
+                pg = ParamGraph(self.interval_function)
             except UnsupportedOperationError:  # f calls a Function: assume the worst
                 return self.n > 0, self.m > 0, self.l > 0, tuple(range(self.n))
             g = ca.vertcat(*[pg.guard_exprs]) if pg.guards else ca.SX(0, 1)
@@ -371,7 +459,7 @@ class Model:
     def is_affine_in_u(self) -> bool:
         """True when f is affine in u: df/du does not depend on u, and no operation that
         may jump (if_else, comparisons, floor, sign, ...) depends on u."""
-        return self.m == 0 or not (ca.depends_on(self._jac("u"), self.u)
+        return self.m == 0 or not (ca.depends_on(self._sjac("u"), self.u)
                                    or self._jump_inputs()[1])
 
     @property
@@ -379,20 +467,20 @@ class Model:
         """True when f is affine in w: df/dw does not depend on w, and no operation that
         may jump (if_else, comparisons, floor, sign, ...) depends on w; True without w.
         Only then do the vertices of W bound the image ``f(x, u, W)``."""
-        return self.w is None or not (ca.depends_on(self._jac("w"), self.w)
+        return self.w is None or not (ca.depends_on(self._sjac("w"), self.w)
                                       or self._jump_inputs()[2])
 
     @property
     def is_additive_in_w(self) -> bool:
         """True when w enters additively, f = g(x, u) + E w with a constant E; True without w."""
-        return self.w is None or not (self._depends(self._jac("w"), self._all_syms())
+        return self.w is None or not (self._depends(self._sjac("w"), self._all_syms())
                                       or self._jump_inputs()[2])
 
     @property
     def is_linear(self) -> bool:
         """True when f is affine in (x, u, w) jointly: all Jacobians constant and no
         operation that may jump (if_else, comparisons, floor, sign, ...) in f."""
-        return not (any(self._depends(self._jac(k), self._all_syms())
+        return not (any(self._depends(self._sjac(k), self._all_syms())
                         for k in ("x", "u", "w") if k != "w" or self.w is not None)
                     or any(self._jump_inputs()[:3]))
 
@@ -403,7 +491,7 @@ class Model:
         The other states form the affine state part of thesis §6.2:
         ``f = A x + g(x_NL, u, w)`` with ``A`` = :attr:`affine_state_matrix`.
         """
-        J = self._jac("x")
+        J = self._sjac("x")
         syms = self._all_syms()
         jump = self._jump_inputs()[3]
         return tuple(j for j in range(self.n) if self._depends(J[:, j], syms) or j in jump)
@@ -473,7 +561,10 @@ class Model:
         -------
         Model
             With ``m = 0``; ``.law`` holds the law's expression in x and ``.input_box`` the
-            open-loop U, so that input constraints ``law(X) ⊆ U`` can be checked.
+            open-loop U, so that input constraints ``law(X) ⊆ U`` can be checked. Its
+            :attr:`f` is CasADi's substitution (constant subexpressions folded in floating
+            point), used by :meth:`step`; its interval evaluators and structure tests use
+            the exact composition :attr:`interval_function`.
         """
         if self.m == 0:
             raise ModelError(f"model '{self.name}' has no input to close the loop on")
@@ -501,7 +592,34 @@ class Model:
                    W=self.W, name=name or f"{self.name}_cl")
         cl.law = law_sx
         cl.input_box = self.U
+        try:
+            cl._exact_f, params, values = self._exact_closed_loop(law_sx)
+            cl._exact_params = (params, values)
+        except UnsupportedOperationError:
+            # f calls a Function (never_inline): no interval evaluator can be compiled from
+            # it, and the structure tests take every variable as entering nonlinearly
+            pass
         return cl
+
+    def _exact_closed_loop(self, law_sx: ca.SX) -> tuple[ca.SX, ca.SX, np.ndarray]:
+        """``f(x, law(x), w)`` with the literals of f and of the law as parameters.
+
+        Returns the expression (in ``self.x``, ``self.w`` and the parameter symbols), the
+        parameters (p, 1) and their values (p,). The law's own literals are parameters too,
+        so that an operation of f on a constant law (``exp(u + 0.1)`` with ``u = 0``) stays
+        symbolic instead of being folded; constants CasADi still creates by simplifying the
+        composition are widened by :func:`~casadi_cmpc.interval._derivative.exact_function`.
+        Raises UnsupportedOperationError when f or the law calls a Function.
+        """
+        pf = ParamGraph(self.function)
+        # dense law: a structural zero would enter f as the number 0 and fold
+        pl = ParamGraph(ca.Function("law", [self.x], [ca.densify(law_sx)]))
+        law_p = ca.Function("law_p", pl.inputs + [pl.params], pl.outputs).call(
+            [self.x, pl.params])[0]
+        f_p = ca.Function("f_p", pf.inputs + [pf.params], pf.outputs).call(
+            [self.x, law_p, self._w_sym, pf.params])[0]
+        return (f_p, ca.vertcat(pf.params, pl.params),
+                np.concatenate([pf.values, pl.values]))
 
     def law_inclusion(self, kind: str = "natural") -> Callable[..., np.ndarray]:
         """For a closed-loop model: interval enclosure of the law, ``(N, n, 2) -> (N, m, 2)``."""

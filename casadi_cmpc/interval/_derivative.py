@@ -30,7 +30,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ["ParamGraph", "ParamFunction", "rule_constants", "jumps", "JUMP_OPS"]
+__all__ = ["ParamGraph", "ParamFunction", "exact_function", "rule_constants", "jumps",
+           "JUMP_OPS"]
 
 # op -> guard kind of its arguments; see ``_guards_of``
 JUMP_OPS = {
@@ -61,7 +62,7 @@ class ParamGraph:
 
     Parameters
     ----------
-    fun : casadi.Function
+    fun : casadi.Function or ParamFunction
         An SX Function with dense inputs.
 
     Attributes
@@ -82,10 +83,18 @@ class ParamGraph:
         ``a / b`` for fmod/remainder, ``cos(a)`` for tan).
     masks : list of list of int
         Per output, per nonzero: bit set of the guards it depends on.
+    widen : ndarray of bool, shape (p,)
+        True for the constants that are not exact literals but values CasADi may have
+        rounded (those a :class:`ParamFunction` ``fun`` lists in ``derived``): they are
+        enclosed with a margin wherever the graph is evaluated, and never decide a guard.
+
+    ``fun`` may also be a :class:`ParamFunction`: its literals (and its widened constants)
+    become parameters like any other constant.
     """
 
-    def __init__(self, fun: ca.Function) -> None:
+    def __init__(self, fun: Any) -> None:
         self.name = fun.name()
+        derived = getattr(fun, "derived", frozenset())
         self.inputs = [ca.SX.sym(f"z{i}", fun.sparsity_in(i)) for i in range(fun.n_in())]
         flat = [ca.vertsplit(ca.vec(s)) if s.numel() else [] for s in self.inputs]
         work: dict[int, Any] = {}
@@ -93,6 +102,7 @@ class ParamGraph:
         const_val: dict[int, float] = {}
         params: list[ca.SX] = []
         values: list[float] = []
+        widen: list[bool] = []
         guard_exprs: list[ca.SX] = []
         self.guards: list[tuple[str, int, float]] = []
         nz_out: list[list[Any]] = [[None] * fun.nnz_out(i) for i in range(fun.n_out())]
@@ -106,9 +116,13 @@ class ParamGraph:
                 params.append(p)
                 v = float(fun.instruction_constant(k))
                 values.append(v)
+                widen.append(k in derived)
                 work[outs[0]] = p
                 mask[outs[0]] = 0
-                const_val[outs[0]] = v
+                if k in derived:  # possibly rounded: its value decides no guard
+                    const_val.pop(outs[0], None)
+                else:
+                    const_val[outs[0]] = v
                 continue
             if op == ca.OP_INPUT:
                 work[outs[0]] = flat[ins[0]][ins[1]]
@@ -138,6 +152,7 @@ class ParamGraph:
             const_val.pop(outs[0], None)
         self.params = ca.vertcat(*params) if params else ca.SX(0, 1)
         self.values = np.asarray(values, dtype=float)
+        self.widen = np.asarray(widen, dtype=bool)
         self.outputs = [ca.SX(fun.sparsity_out(i), ca.vertcat(*nz_out[i]))
                         if nz_out[i] else ca.SX(fun.sparsity_out(i))
                         for i in range(fun.n_out())]
@@ -148,7 +163,7 @@ class ParamGraph:
         """``Function(inputs + [params] -> outputs)`` viewed with the params as constants."""
         g = ca.Function(name, list(inputs) + [self.params], list(outputs),
                         {"live_variables": False})
-        return ParamFunction(g, len(inputs), self.values)
+        return ParamFunction(g, len(inputs), self.values, self.widen)
 
 
 def _guards_of(op: int, args: list[Any], c: float | None
@@ -261,18 +276,58 @@ class ParamFunction:
     Quacks like the ``casadi.Function`` it wraps (for the interval compiler): the last input
     ``p`` is hidden (``n_in``) and its ``OP_INPUT`` instructions read as ``OP_CONST`` with
     the literal values. :attr:`literals` holds those instruction indices.
+
+    Parameters
+    ----------
+    g : casadi.Function
+        SX Function whose last input is the parameter vector ``p`` (dense, shape (q, 1)).
+    n_real : int
+        Number of inputs before ``p``.
+    values : ndarray, shape (q,)
+        The values of ``p``.
+    widen : ndarray of bool, shape (q,), optional
+        True for the parameters whose value may be rounded (enclosed with a margin instead
+        of thin); default: all exact.
+    widen_own : bool
+        Also widen the constants of ``g`` itself (``OP_CONST``): set it when ``g`` was built
+        by composing expressions whose literals are all in ``p``, so that any constant left
+        in ``g`` was created, and possibly rounded, by CasADi's simplifications.
+
+    Attributes
+    ----------
+    literals : frozenset of int
+        Instructions that read ``p``.
+    derived : frozenset of int
+        Constant instructions (reads of widened parameters, and the constants of ``g`` with
+        ``widen_own``) that an interval evaluation must widen.
     """
 
-    def __init__(self, g: ca.Function, n_real: int, values: np.ndarray) -> None:
+    def __init__(self, g: ca.Function, n_real: int, values: np.ndarray,
+                 widen: np.ndarray | None = None, widen_own: bool = False) -> None:
         self._g = g
         self._n = int(n_real)
+        values = np.asarray(values, dtype=float).reshape(-1)
+        if values.size != g.nnz_in(self._n):
+            raise ValueError(f"'{g.name()}' has {g.nnz_in(self._n)} parameters; got "
+                             f"{values.size} values")
+        wid = (np.zeros(values.size, dtype=bool) if widen is None
+               else np.asarray(widen, dtype=bool).reshape(-1))
         self._const: dict[int, float] = {}
+        derived = set()
         for k in range(g.n_instructions()):
-            if g.instruction_id(k) == ca.OP_INPUT:
+            op = g.instruction_id(k)
+            if op == ca.OP_INPUT:
                 ins = g.instruction_input(k)
                 if ins[0] == self._n:
                     self._const[k] = float(values[ins[1]])
+                    if wid[ins[1]]:
+                        derived.add(k)
+            elif op == ca.OP_CONST and widen_own:
+                derived.add(k)
         self.literals = frozenset(self._const)
+        self.derived = frozenset(derived)
+        self.values = values
+        self.widen = wid
 
     def instruction_id(self, k: int) -> int:
         return ca.OP_CONST if k in self._const else self._g.instruction_id(k)
@@ -286,14 +341,54 @@ class ParamFunction:
     def n_in(self) -> int:
         return self._n
 
+    @property
+    def function(self) -> ca.Function:
+        """The wrapped Function ``G(inputs..., p)`` (``p`` its last input)."""
+        return self._g
+
     def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):  # protocols (copy, pickle) and unset private state
+            raise AttributeError(name)
         return getattr(self._g, name)
+
+    def __repr__(self) -> str:
+        return (f"ParamFunction('{self._g.name()}', {self._n} inputs, "
+                f"{self.values.size} parameters, {len(self.derived)} widened constants)")
+
+
+def exact_function(name: str, inputs: Sequence[ca.SX], outputs: Sequence[ca.SX],
+                   params: ca.SX, values: np.ndarray) -> ParamFunction:
+    """``(inputs...) -> outputs`` with the symbols ``params`` read as exact constants.
+
+    Parameters
+    ----------
+    name : str
+    inputs : list of casadi.SX
+        Dense symbolic inputs.
+    outputs : list of casadi.SX
+        Expressions of ``inputs`` and ``params``.
+    params : casadi.SX, shape (q, 1)
+        Symbols standing for exact numbers (e.g. :attr:`ParamGraph.params` of the graphs
+        composed into ``outputs``).
+    values : ndarray, shape (q,)
+        Their values.
+
+    Returns
+    -------
+    ParamFunction
+        Every constant of the outputs that is not among ``params`` was created by CasADi
+        while composing (``a - a`` -> 0, then ``acos(0)`` folded) and is widened.
+    """
+    g = ca.Function(name, list(inputs) + [params], list(outputs), {"live_variables": False})
+    return ParamFunction(g, len(inputs), np.asarray(values, dtype=float).reshape(-1),
+                         widen_own=True)
 
 
 def rule_constants(g: ParamFunction) -> frozenset[int]:
     """Instructions of ``g`` that load a constant created by differentiation (not a literal of
-    f) and not provably exact: everything except 0 and small integers and halves."""
-    out = set()
+    f) and not provably exact: everything except 0 and small integers and halves; and the
+    constants ``g`` marks as possibly rounded (:attr:`ParamFunction.derived`)."""
+    out = set(getattr(g, "derived", ()))
     for k in range(g.n_instructions()):
         if g.instruction_id(k) != ca.OP_CONST or k in g.literals:
             continue
@@ -387,8 +482,8 @@ class JacobianInclusion:
 
     Parameters
     ----------
-    fun : casadi.Function
-        SX Function with dense inputs.
+    fun : casadi.Function or ParamFunction
+        SX Function with dense inputs (a ParamFunction: its parameters as constants).
     wrt, out : int
         Input and output indices.
 
@@ -396,10 +491,10 @@ class JacobianInclusion:
     returns ``(n, m, d, 2)`` with ``m`` = numel of the output, ``d`` = numel of the input.
     """
 
-    def __init__(self, fun: ca.Function, wrt: int = 0, out: int = 0) -> None:
+    def __init__(self, fun: Any, wrt: int = 0, out: int = 0) -> None:
         from .compiler import _as_sx_function, _compile
 
-        fun = _as_sx_function(fun)
+        fun = _as_sx_function(fun, allow_param=True)
         graph = ParamGraph(fun)
         y = ca.vec(graph.outputs[out])
         z = ca.vec(graph.inputs[wrt])

@@ -82,7 +82,16 @@ def _op_name(op: int) -> str:
     return f"op {op}"
 
 
-def _as_sx_function(fun: Any) -> ca.Function:
+def _as_sx_function(fun: Any, allow_param: bool = False) -> ca.Function:
+    """``fun`` checked (SX, no free symbols, dense inputs), an MX Function expanded.
+
+    With ``allow_param`` a :class:`~._derivative.ParamFunction` (an SX Function whose
+    parameter reads are exact constants) is accepted as it is."""
+    if allow_param and isinstance(fun, _dv.ParamFunction):
+        if not fun.function.is_a("SXFunction") or fun.function.has_free():
+            raise TypeError(f"ParamFunction '{fun.name()}' must wrap an SX Function without "
+                            "free symbols")
+        return fun  # type: ignore[return-value]
     if not isinstance(fun, ca.Function):
         raise TypeError(f"expected a casadi.Function, got {type(fun).__name__}")
     if not fun.is_a("SXFunction"):
@@ -404,8 +413,11 @@ class InclusionFunction:
 
     Parameters
     ----------
-    fun : casadi.Function
-        SX Function (an MX Function is expanded) with dense inputs.
+    fun : casadi.Function or ParamFunction
+        SX Function (an MX Function is expanded) with dense inputs; or a
+        :class:`~._derivative.ParamFunction`, whose parameters enter as exact constants (and
+        its possibly rounded constants, :attr:`~._derivative.ParamFunction.derived`, with a
+        margin).
     kind : {"natural", "centered"}
         See :func:`inclusion`.
     backend : {"auto", "numpy", "scalar"}
@@ -416,8 +428,8 @@ class InclusionFunction:
 
     Attributes
     ----------
-    fun : casadi.Function
-        The SX Function (expanded if an MX Function was given).
+    fun : casadi.Function or ParamFunction
+        The SX Function (expanded if an MX Function was given), or the ParamFunction given.
     kind : str
         ``"natural"`` or ``"centered"``.
     centered_fallback : bool
@@ -472,17 +484,21 @@ class InclusionFunction:
     scalar_max_batch: int = 32
     scalar_max_batch_centered: int = 16
 
-    def __init__(self, fun: ca.Function, kind: str = "natural", *, backend: str = "auto",
-                 derived_outputs: Sequence[int] = (), evaluate: Sequence[int] | None = None
-                 ) -> None:
+    def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
+                 backend: str = "auto", derived_outputs: Sequence[int] = (),
+                 evaluate: Sequence[int] | None = None) -> None:
         kind = str(kind).lower()
         if kind not in _KINDS:
             raise ValueError(f"unknown inclusion kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
         backend = _check_backend(backend)
-        fun = _as_sx_function(fun)
+        fun = _as_sx_function(fun, allow_param=True)
+        self._param = isinstance(fun, _dv.ParamFunction)
         if derived_outputs or evaluate is not None:
             if kind != "natural":
                 raise ValueError("derived_outputs/evaluate are for natural inclusions only")
+            if self._param:
+                raise TypeError("derived_outputs/evaluate need a casadi.Function, not a "
+                                "ParamFunction")
             fun = _restrict(fun, derived_outputs, evaluate)
             self._widen = _derived_constants(
                 fun.fun, [i for i in range(fun.fun.n_out()) if i not in derived_outputs])
@@ -499,7 +515,10 @@ class InclusionFunction:
         self.size_in = [fun.numel_in(i) for i in range(self.n_in)]
         self.size_out = [fun.numel_out(i) for i in outs]
         self._out_pos = [np.asarray(fun.sparsity_out(i).find(), dtype=np.intp) for i in outs]
-        self._eval, self.source = _compile(fun, self._widen, self._keep)
+        # constants to widen: derived ones of a restricted form, and those a ParamFunction
+        # marks as possibly rounded
+        self._cwiden = self._widen | frozenset(getattr(fun, "derived", ()))
+        self._eval, self.source = _compile(fun, self._cwiden, self._keep)
         self.backend = backend
         self.scalar_unsupported = _scalar_unsupported(fun)
         self._scalar_fn: Callable[..., list[list[Any]]] | None = None
@@ -566,7 +585,7 @@ class InclusionFunction:
     def _single_natural(self) -> bool:
         """One input, one output, plain natural evaluation (what the element evaluators need)."""
         return (self.n_in == 1 and self.n_out == 1 and self._keep is None and not self._widen
-                and (self.kind == "natural" or self.centered_fallback))
+                and not self._param and (self.kind == "natural" or self.centered_fallback))
 
     def _traced(self) -> tuple[ca.Function, list[ca.SX], list[ca.SX]]:
         """``(g, inputs, outputs)``: the Function rebuilt with one work slot per node (to trace
@@ -896,7 +915,7 @@ class InclusionFunction:
     def _scalar(self) -> Callable[..., list[list[Any]]]:
         if self._scalar_fn is None:
             self._scalar_fn, self.scalar_source = _compile_scalar(
-                self.fun, self._widen, self._keep, self._out_pos, self.size_out)
+                self.fun, self._cwiden, self._keep, self._out_pos, self.size_out)
         return self._scalar_fn
 
     def _run_scalar(self, lists: list[list[Any]], n: int,
@@ -1282,14 +1301,16 @@ class _InclusionCache:
 _CACHE = _InclusionCache()
 
 
-def inclusion(fun: ca.Function, kind: str = "natural", *, backend: str = "auto"
-              ) -> InclusionFunction:
+def inclusion(fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
+              backend: str = "auto") -> InclusionFunction:
     """Compile a CasADi Function into a batched interval inclusion function (cached).
 
     Parameters
     ----------
-    fun : casadi.Function
+    fun : casadi.Function or ParamFunction
         An SX Function (an MX Function is expanded to SX when possible). Inputs must be dense.
+        A :class:`~._derivative.ParamFunction` (e.g. :attr:`casadi_cmpc.Model.interval_function`
+        of a closed loop) reads its parameters as exact constants.
     kind : {"natural", "centered"}
         ``"natural"``: every operation replaced by its interval extension.
         ``"centered"``: the mean-value form ``f(m) + J(Z)(Z - m)`` over the joint box ``Z`` of

@@ -58,7 +58,12 @@ import casadi as ca
 import numpy as np
 from scipy import special as _special
 
-from ..exceptions import DimensionError, EmptySetError, InvalidBoundsError
+from ..exceptions import (
+    DimensionError,
+    EmptySetError,
+    InvalidBoundsError,
+    UnsupportedOperationError,
+)
 from . import arith as A
 from .compiler import _BINARY, _UNARY, _as_sx_function
 
@@ -734,4 +739,55 @@ def contractor(fun: ca.Function, Y: Any, *, n_iter: int = 1,
     >>> empty
     array([False,  True])
     """
+    from ._derivative import ParamFunction
+
+    if isinstance(fun, ParamFunction):
+        return _ParamContractor(fun, Y, n_iter=n_iter, rtol=rtol)
     return Contractor(fun, Y, n_iter=n_iter, rtol=rtol)
+
+
+class _ParamContractor:
+    """Contractor of a :class:`~._derivative.ParamFunction` ``G(x, p)`` with exact literals.
+
+    The parameters ``p`` become extra input columns, held at their (thin) values, or at an
+    interval around a value that may be rounded (``ParamFunction.widen``); the contractor
+    of ``[x; p] -> G(x, p)`` then never folds a literal, and only the ``x`` columns are
+    returned. A ParamFunction whose own constants must be widened is refused.
+    """
+
+    def __init__(self, pf: Any, Y: Any, *, n_iter: int = 1, rtol: float = 0.01) -> None:
+        from .compiler import _widen_constant
+
+        g = pf.function
+        if pf.n_in() != 1 or g.n_out() != 1:
+            raise DimensionError(
+                f"contractor needs a Function with one input and one output; "
+                f"'{g.name()}' has {pf.n_in()} inputs and {g.n_out()} outputs")
+        own = [k for k in pf.derived if k not in pf.literals]
+        if own:
+            raise UnsupportedOperationError(
+                f"'{g.name()}' holds constants created by CasADi's simplifications, which "
+                "the contractor cannot widen; use sivia without contract=True")
+        x = ca.SX.sym("x", g.sparsity_in(0).nnz())
+        p = ca.SX.sym("p", g.nnz_in(1))
+        out = g(ca.reshape(x, g.sparsity_in(0)) if g.sparsity_in(0).is_dense() else x, p)
+        self._C = Contractor(ca.Function(g.name(), [ca.vertcat(x, p)], [out]), Y,
+                             n_iter=n_iter, rtol=rtol)
+        v = np.asarray(pf.values, dtype=float)
+        lo, hi = v.copy(), v.copy()
+        for i in np.flatnonzero(pf.widen):
+            lo[i], hi[i] = _widen_constant(float(v[i]))
+        self._plo, self._phi = lo, hi
+        self.n = int(x.numel())
+        self.m = self._C.m
+        self.Y = self._C.Y
+
+    def __call__(self, lo: Any, hi: Any, **kw: Any
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        lo = np.atleast_2d(np.asarray(lo, dtype=float))
+        hi = np.atleast_2d(np.asarray(hi, dtype=float))
+        N = lo.shape[0]
+        L = np.hstack([lo, np.broadcast_to(self._plo, (N, self._plo.size))])
+        H = np.hstack([hi, np.broadcast_to(self._phi, (N, self._phi.size))])
+        l2, h2, empty = self._C(L, H, **kw)
+        return l2[:, :self.n], h2[:, :self.n], empty

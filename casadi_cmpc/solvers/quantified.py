@@ -107,7 +107,9 @@ class _QuantifiedClassifier:
         self.W = W
         self.ylo = Y.lo
         self.yhi = Y.hi
-        self.witnesses = opts["witnesses"] and l > 0
+        # a point W (a nominal problem): "exists w" and "for all w" coincide
+        self.point_w = l > 0 and bool((W[:, 0] == W[:, 1]).all())
+        self.witnesses = opts["witnesses"] and l > 0 and not self.point_w
         self.C = 2 * self.p if self.witnesses else 0
         self.us = slice(n, n + m)
         self.ws = slice(n + m, self.d)
@@ -188,8 +190,8 @@ class _QuantifiedClassifier:
         excl = data["excl"]
         if self.C:
             excl |= ex[1:].T
-        elif self.l == 0:
-            excl[:, 0] |= own  # no w: the exclusion holds for every w
+        elif self.l == 0 or self.point_w:
+            excl[:, 0] |= own  # no w, or a single w: the exclusion holds for every w
         # the cell is all of U: ∃w ∀x ∀u f ∉ Y, so no x of the box is in the set
         excl[whole & own] = True
         useless = data["useless"]

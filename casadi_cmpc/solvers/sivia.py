@@ -11,6 +11,7 @@ import numpy as np
 from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
+from ..interval._derivative import ParamFunction
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.base import SetBase
@@ -24,7 +25,7 @@ __all__ = ["sivia", "image_classifier"]
 
 
 def _as_inclusion(f: Any, kind: str) -> InclusionFunction:
-    if isinstance(f, ca.Function):
+    if isinstance(f, (ca.Function, ParamFunction)):
         if f.n_in() != 1 or f.n_out() != 1:
             raise DimensionError(
                 f"sivia needs a Function with one input and one output; '{f.name()}' has "
@@ -394,14 +395,10 @@ def _model_map(model: Model, X0: Any, W: Any) -> tuple[ca.Function, Any, np.ndar
     if model.l == 0:
         if W is not None:
             raise ModelError(f"model '{model.name}' has no disturbance w; do not pass W")
-        fun = model._cached(("sivia_map",), lambda: ca.Function(
-            f"{model.name}_successor", [model.x], [model.f], ["x"], ["x_next"]))
-        return fun, X0, None
+        # exact literals: the f of a closed loop is rounded (see Model.interval_map)
+        return model.interval_map("x"), X0, None
     Wb = single_box(model.W if W is None else W, "W", model.l)
-    fun = model._cached(("sivia_map_xw",), lambda: ca.Function(
-        f"{model.name}_successor_xw", [ca.vertcat(model.x, model.w)], [model.f], ["xw"],
-        ["x_next"]))
-    return fun, X0, Wb
+    return model.interval_map("xw", joined=True), X0, Wb
 
 
 def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,

@@ -771,7 +771,10 @@ class _Image:
         self.m = int(expr.numel())
         if self.W is None:
             syms = [x]
-        fun = ca.Function(f"{name}_map", syms, [expr])
+        if isinstance(f, Model):  # exact literals (the f of a closed loop is rounded)
+            fun = f.interval_map("xw" if self.W is not None else "x")
+        else:
+            fun = ca.Function(f"{name}_map", syms, [expr])
         self.fun = fun
         self.discontinuous = _discontinuous_ops(fun)
         if self.discontinuous:
