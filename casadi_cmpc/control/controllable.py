@@ -452,6 +452,55 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
                       target=target, n_pairs=r["n_pairs"])
 
 
+def _modal_rows(model: Model, A: np.ndarray, robust: bool) -> tuple[ca.Function, Box | None]:
+    """The rows ``A f(x, u, w)`` as a Function for :func:`quantified_sivia`, and its W.
+
+    Nothing is replaced by a number: CasADi would fold the constant subexpressions of the
+    result in floating point (``exp(w + 0.1)`` with ``w = 0`` would become
+    ``fl(exp(0.1))``, ``3 * f_j`` with a constant ``f_j = 0.7`` would become
+    ``fl(3 * 0.7)``), and the proof would be about a rounded model. So w stays a symbol:
+    over W (``robust``) or over the thin box ``[c, c]`` at the centre ``c`` of W
+    (nominal); and a constant element ``f_j`` of f enters as one more thin component of w
+    (universal quantification over one point), so that ``A_ij f_j`` is an interval product.
+    With neither w nor a constant element, the Function takes ``(x, u)`` and W is None.
+
+    Parameters
+    ----------
+    model : Model
+    A : ndarray, shape (r, n)
+        The rows of the target polytope.
+    robust : bool
+        Quantify w over W (else: at the centre of W).
+
+    Returns
+    -------
+    (casadi.Function, Box or None)
+        ``(x, u[, w'])`` -> ``A f`` of shape (r, 1), with ``w'`` = ``(w, constants of f)``;
+        the box of ``w'`` (None without ``w'``).
+    """
+    f = model.f
+    const = [j for j in range(model.n) if f[j].is_constant()]
+    s = ca.SX.sym("s", len(const))
+    fs = ca.vertcat(*[s[const.index(j)] if j in const else f[j] for j in range(model.n)])
+    rows = ca.mtimes(ca.DM(A), fs)  # A_ij f_j folds only for a constant f_j, a symbol here
+    lo, hi, syms = [], [], []
+    if model.l:
+        Wa = _w_setup(model, robust, None)[0]  # W, or [c, c] at its centre as for "general"
+        lo.append(Wa[:, 0])
+        hi.append(Wa[:, 1])
+        syms.append(model.w)
+    if const:
+        v = np.array([float(ca.DM(f[j])) for j in const])
+        lo.append(v)
+        hi.append(v)
+        syms.append(s)
+    if not syms:
+        return ca.Function("target_rows", [model.x, model.u], [rows]), None
+    w = ca.vertcat(*syms)
+    g = ca.Function("target_rows", [model.x, model.u, w], [rows])
+    return g, Box(np.concatenate(lo), np.concatenate(hi))
+
+
 def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative: bool,
            max_boxes: int, time_limit: float | None, progress: bool | None,
            options: dict[str, Any] | None, obstacles: list[Any]) -> OneStepSet:
@@ -462,19 +511,8 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
         raise ValueError("method='modal' needs one Polytope or Box target")
     P = members[0]
     A, b = np.asarray(P.A, dtype=float), np.asarray(P.b, dtype=float)
-    H = ca.SX.sym("H", A.shape[0], model.n)
-    rows = ca.substitute(ca.mtimes(H, model.f), ca.vec(H), ca.DM(A.ravel(order="F")))
-    if model.l and robust:
-        g = ca.Function("target_rows", [model.x, model.u, model.w], [rows])
-        Wb = model.W
-        sem = MODAL
-    else:
-        if model.l:
-            c = model.W.mid
-            rows = ca.substitute(rows, model.w, ca.DM(c))
-        g = ca.Function("target_rows", [model.x, model.u], [rows])
-        Wb = None
-        sem = NOMINAL if model.l else NO_W
+    g, Wb = _modal_rows(model, A, robust)
+    sem = (MODAL if robust else NOMINAL) if model.l else NO_W
     Y = Box(np.full(A.shape[0], -np.inf), b)
     t0 = time.perf_counter()
     pav = quantified_sivia(g, D, model.U, Wb, Y, eps, options=options, relative=relative,
@@ -521,10 +559,17 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
         return Certificate("assumed", None, "T is control invariant",
                            "assume_invariant=True: not proven; the sets are then inner "
                            "approximations of the i-step sets only if T is invariant")
+    W_need = (model.W if robust else Box(model.W.mid, model.W.mid)) if model.l else None
     if certificate is not None:
-        if not isinstance(certificate, Certificate) or certificate.proved is not True:
-            raise ValueError("certificate must be a proved Certificate of T's invariance "
-                             "(from cm.certify_invariant)")
+        from .invariance import check_about
+
+        why = check_about(certificate, model, T, W_need, law)
+        if why is not None:
+            raise ValueError(
+                f"certificate does not prove T invariant for this problem: {why}. Give the "
+                "proved Certificate of cm.certify_invariant(model, T, law, ...) for this "
+                "model, this T and " + ("W" if robust else "the centre of W") + ", or law= "
+                "to certify T here")
         return certificate
     if law is None:
         raise ValueError(
@@ -534,8 +579,7 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
             "without a proof")
     if not isinstance(T, Polytope):
         raise ValueError("certifying T with law= needs T as a Polytope")
-    W = model.W if (robust and model.l) else (
-        Box(model.W.mid, model.W.mid) if model.l else None)
+    W = W_need
     size = float(np.max(T.bounding_box().diam))
     for e in (0.02, 0.005, 0.0015, 0.0005):  # finer pieces (relative to T) while undecided
         cert = certify_invariant(model, T, law, eps=e * size, W=W, time_limit=60)
@@ -546,6 +590,22 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
                          f"({cert.label}: {cert.reason}); pass assume_invariant=True to "
                          "proceed without a proof")
     return cert
+
+
+def _terminal_info(model: Model, cert: Any) -> dict[str, Any]:
+    """What the sequence stores of T's certificate: the law it proves (text, key,
+    serialized Function), the disturbance box it covers and the claim."""
+    from .invariance import model_key
+
+    ab = getattr(cert, "about", None) or {}
+    out: dict[str, Any] = {"terminal_claim": cert.claim, "model_key": model_key(model)}
+    if cert.proved is True and ab.get("law_key"):
+        out.update(terminal_law=ab["law"], terminal_law_key=ab["law_key"],
+                   terminal_law_function=ab["law_function"])
+        if ab.get("W") is not None:
+            out["terminal_W"] = [np.asarray(ab["W"].lo).tolist(),
+                                 np.asarray(ab["W"].hi).tolist()]
+    return out
 
 
 def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
@@ -564,7 +624,9 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     T : Polytope
         Terminal set, (robustly) control invariant. It must be proven so: give ``law`` (the
         local law: a gain ``K`` (m, n), ``u = K x``, or an SX expression of ``model.x``),
-        or ``certificate`` (a proved :class:`~casadi_cmpc.Certificate`), or
+        or ``certificate`` (a proved :class:`~casadi_cmpc.Certificate` of
+        :func:`~casadi_cmpc.certify_invariant` about this model, this very T and W, or the
+        centre of W when ``robust=False``: checked, with a clear error otherwise), or
         ``assume_invariant=True`` to proceed without a proof (then nothing is claimed about
         the nesting of the sets).
     eps : float
@@ -630,7 +692,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     seq = SetSequence(sets=[T], info={
         "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
         "polytopic": bool(polytopic), "terminal_certificate": cert.label,
-        "state_names": [f"x{i + 1}" for i in range(model.n)]})
+        "state_names": [f"x{i + 1}" for i in range(model.n)],
+        **_terminal_info(model, cert)})
     frontier = D.as_array()[None]
     inner = np.zeros((0, model.n, 2))
     target: Any = T

@@ -121,41 +121,81 @@ def _check_target(S: Any, n: int) -> None:
         raise DimensionError(f"S has dimension {S.dim}, the model has n = {n}")
 
 
-def _domain(S: Any) -> Zonotope:
-    """A zonotope covering S, generators widened by 1e-9 relative.
+_WIDEN = (1e-9, 1e-6, 1e-3, 1e-1)
 
-    A Zonotope S is its own domain. A Polytope S that is a parallelotope (n pairs of
-    opposite rows) is written as a zonotope, any other one is bounded by a parallelotope.
+
+def _domain(S: Any) -> tuple[Zonotope | None, str]:
+    """A zonotope proven to contain S, and how it was obtained (None: no cover proven).
+
+    A Zonotope S is its own domain (exactly: only its zero generators are dropped). For a
+    Polytope S, candidates are tried in turn, each with its generators widened by
+    ``1e-9``, ``1e-6``, ``1e-3`` and ``0.1`` relative: the parallelotope of a polytope
+    with n pairs of opposite rows (from a floating-point inverse of the row matrix), a
+    parallelotope around the floating-point vertices (§4.2.5), and the bounding box of S
+    (rigorous LP-dual bounds). Floating-point inverses and vertices only *propose* a
+    candidate: each is accepted only when ``S ⊆ candidate`` is proven by
+    :meth:`Zonotope.contains_polytope` (exact rational bounds, no vertex enumeration).
     """
-    from ..solvers.zonotope_sivia import _bounding_parallelotope
-
     if isinstance(S, Zonotope):
         G = S.generators
-        G = G[:, np.any(G != 0.0, axis=0)]
-        return Zonotope(S.center, G * (1.0 + 1e-9))
+        return Zonotope(S.center, G[:, np.any(G != 0.0, axis=0)]), "S itself"
+    for make, how in ((_row_parallelotope, "parallelotope of the row pairs of S"),
+                      (_vertex_parallelotope, "parallelotope around the vertices of S"),
+                      (_box_parallelotope, "bounding box of S")):
+        try:
+            Z = make(S)
+        except Exception:  # a float construction that failed proposes nothing
+            Z = None
+        if Z is None or not np.isfinite(Z.generators).all() or not np.isfinite(Z.center).all():
+            continue
+        for w in _WIDEN:
+            cand = Zonotope(Z.center, Z.generators * (1.0 + w))
+            if cand.contains_polytope(S) is True:
+                return cand, f"{how} (widened by {w:g} relative; S inside it proven)"
+    return None, "no zonotope proven to contain S"
+
+
+def _row_parallelotope(S: Polytope) -> Zonotope | None:
+    """For n pairs of opposite rows ``lo <= V x <= hi``: the zonotope ``V^-1 (mid + diag(half)
+    B)`` from a floating-point inverse (a proposal, checked by the caller)."""
     A, b = S.A, S.b
     n = S.dim
-    if A.shape[0] == 2 * n:
-        pairs, used = [], set()
-        for i in range(2 * n):
-            if i in used:
-                continue
-            j = next((j for j in range(i + 1, 2 * n) if j not in used
-                      and np.array_equal(A[j], -A[i])), None)
-            if j is None:
-                break
-            used.update((i, j))
-            pairs.append((i, j))
-        if len(pairs) == n:
-            V = np.array([A[i] for i, _ in pairs])
-            lo = np.array([-b[j] for _, j in pairs])
-            hi = np.array([b[i] for i, _ in pairs])
-            if np.linalg.matrix_rank(V) == n and (hi > lo).all():
-                Vi = np.linalg.inv(V)
-                c = Vi @ (0.5 * (lo + hi))
-                G = Vi * (0.5 * (hi - lo))[None, :]
-                return Zonotope(c, G * (1.0 + 1e-9))
+    if A.shape[0] != 2 * n:
+        return None
+    pairs, used = [], set()
+    for i in range(2 * n):
+        if i in used:
+            continue
+        j = next((j for j in range(i + 1, 2 * n) if j not in used
+                  and np.array_equal(A[j], -A[i])), None)
+        if j is None:
+            return None
+        used.update((i, j))
+        pairs.append((i, j))
+    V = np.array([A[i] for i, _ in pairs])
+    lo = np.array([-b[j] for _, j in pairs])
+    hi = np.array([b[i] for i, _ in pairs])
+    if np.linalg.matrix_rank(V) < n or not (hi > lo).all():
+        return None
+    Vi = np.linalg.inv(V)
+    return Zonotope(Vi @ (0.5 * (lo + hi)), Vi * (0.5 * (hi - lo))[None, :])
+
+
+def _vertex_parallelotope(S: Polytope) -> Zonotope:
+    """A parallelotope around the floating-point vertices of S (a proposal)."""
+    from ..solvers.zonotope_sivia import _bounding_parallelotope
+
     return _bounding_parallelotope(S)
+
+
+def _box_parallelotope(S: Polytope) -> Zonotope | None:
+    """The bounding box of S from rigorous LP-dual support bounds, as a zonotope."""
+    n = S.dim
+    h = S._support_upper(np.vstack([np.eye(n), -np.eye(n)]))
+    if not np.isfinite(h).all():
+        return None
+    hi, lo = h[:n], -h[n:]
+    return Zonotope(0.5 * lo + 0.5 * hi, np.diag(np.maximum(0.5 * hi - 0.5 * lo, 0.0)))
 
 
 def _disjoint(fr: Any, S: Any) -> np.ndarray:
@@ -177,22 +217,28 @@ def _proven_in(S: Any, P: np.ndarray) -> np.ndarray:
     return np.asarray(S.contains_box(np.stack([P, P], axis=-1)), dtype=bool)
 
 
-def _sample_points(S: Any, k: int, rng: np.random.Generator) -> np.ndarray:
-    """Vertices of S pulled slightly inwards, its centre and ``k`` random points (some of
-    them at sign vectors of the generators of a zonotope): candidates for counterexamples."""
-    V = np.asarray(S.vertices(), dtype=float)
-    if isinstance(S, Zonotope):
-        c = S.center
-        G = S.generators
-        a = rng.uniform(-1.0, 1.0, (k, G.shape[1]))
-        a[: k // 2] = np.sign(a[: k // 2])
-        R = c + (1.0 - 1e-7) * (a @ G.T)
-    else:
-        c = V.mean(axis=0)
-        bb = S.bounding_box()
-        R = bb.lo + (bb.hi - bb.lo) * rng.random((k, S.dim))
-    return np.concatenate([V, c + (1 - 1e-9) * (V - c), c + (1 - 1e-6) * (V - c), c[None],
-                           R])
+def _sample_points(S: Any, Z0: Zonotope, k: int, rng: np.random.Generator) -> np.ndarray:
+    """Candidates for counterexamples: vertices of S (of its cover ``Z0`` when S's vertices
+    cannot be enumerated) pulled slightly inwards, its centre, and ``k`` random points of
+    the cover (half of them at sign vectors of its generators). Points outside S are
+    filtered out later (``_proven_in``)."""
+    try:
+        V = np.asarray(S.vertices(), dtype=float)
+    except Exception:  # float vertex enumeration failed on an ill-conditioned S
+        V = np.zeros((0, S.dim))
+    if V.shape[0] == 0 or not np.isfinite(V).all():
+        try:
+            V = np.asarray(Z0.vertices(), dtype=float)
+        except Exception:
+            V = Z0.center[None, :]
+    c = Z0.center if isinstance(S, Zonotope) else V.mean(axis=0)
+    G = Z0.generators
+    a = rng.uniform(-1.0, 1.0, (k, G.shape[1]))
+    a[: k // 2] = np.sign(a[: k // 2])
+    R = Z0.center + (1.0 - 1e-7) * (a @ G.T)
+    pts = np.concatenate([V, c + (1 - 1e-9) * (V - c), c + (1 - 1e-6) * (V - c), c[None],
+                          Z0.center[None], R])
+    return pts[np.isfinite(pts).all(axis=1)]
 
 
 def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fun: Any,
@@ -205,13 +251,19 @@ def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fu
         return None
     u = np.asarray(law_fun.map(P.shape[0])(P.T), dtype=float).T.reshape(-1, model.m)
     UL = cl.law_inclusion()(np.stack([P, P], axis=-1))
-    out_u = ((UL[:, :, 1] < model.U.lo) | (UL[:, :, 0] > model.U.hi)).any(axis=1)
+    # the enclosure of law(x) at the point proven outside U; the point reported is the
+    # one with the largest proven excess (never a point merely sampled)
+    with np.errstate(invalid="ignore"):
+        excess = np.maximum(model.U.lo - UL[:, :, 1], UL[:, :, 0] - model.U.hi)
+    excess = np.where(np.isnan(excess), -np.inf, excess).max(axis=1)
+    out_u = excess > 0.0
     if out_u.any():
-        k = int(np.argmax(np.abs(u).max(axis=1) * out_u))
+        k = int(np.argmax(np.where(out_u, excess, -np.inf)))
         return Certificate(
             "refuted", False, claim,
-            f"input bound: law(x) = {u[k].tolist()} lies outside U = "
-            f"[{model.U.lo.tolist()}, {model.U.hi.tolist()}] at x = {P[k].tolist()}",
+            f"input bound: law(x) in [{UL[k, :, 0].tolist()}, {UL[k, :, 1].tolist()}] "
+            f"(≈ {u[k].tolist()}) lies outside U = [{model.U.lo.tolist()}, "
+            f"{model.U.hi.tolist()}] at x = {P[k].tolist()}",
             details, counterexample=P[k])
     for wv in w_pts:
         nxt = cl.step(P, None, np.broadcast_to(wv, (P.shape[0], model.l))
@@ -219,7 +271,11 @@ def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fu
         Wt = (np.broadcast_to(np.stack([wv, wv], axis=-1), (P.shape[0], model.l, 2))
               if model.l else None)
         enc = cl.inclusion("natural")(np.stack([P, P], axis=-1), None, Wt)
-        out_s = ~np.asarray(S.intersects_box(enc), dtype=bool)
+        # proven disjoint from S (for a polytope: one row separates the enclosure, with
+        # rigorous rounding; cheap, and a proof)
+        out_s = (np.asarray(S._kernel().separates(enc), dtype=bool)
+                 if isinstance(S, Polytope) else
+                 ~np.asarray(S.intersects_box(enc), dtype=bool))
         if out_s.any():
             k = int(np.flatnonzero(out_s)[0])
             ws = f" with w = {wv.tolist()}" if model.l else ""
@@ -287,7 +343,7 @@ def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = No
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
     _check_target(S, model.n)
     return _certify(model, _closed(model, law), S, eps, W, max_boxes, time_limit, samples,
-                    seed, progress)
+                    seed, progress, law=law)
 
 
 def _closed(model: Model, law: Any) -> tuple[Model, Any]:
@@ -296,30 +352,132 @@ def _closed(model: Model, law: Any) -> tuple[Model, Any]:
     return model.closed_loop(expr), ca.Function("law", [model.x], [expr])
 
 
+def model_key(model: Model) -> str:
+    """A hash of the model's map ``f(x, u, w)`` (its serialized CasADi Function)."""
+    import hashlib
+
+    return hashlib.sha256(model.function.serialize().encode()).hexdigest()[:20]
+
+
+def law_identity(model: Model, law: Any) -> dict[str, str]:
+    """The law as stored with a certificate: ``law`` (text), ``law_key`` (a hash of its
+    expression in the model's x) and ``law_function`` (the serialized Function ``x -> u``).
+
+    Two laws have the same key when they are the same expression of x (a gain matrix K
+    and ``K @ x`` written as an SX expression are the same expression)."""
+    import hashlib
+
+    expr = _law_expr(model, law)
+    fun = ca.Function("law", [model.x], [expr])
+    ser = fun.serialize()
+    return {"law": str(expr), "law_key": hashlib.sha256(ser.encode()).hexdigest()[:20],
+            "law_function": ser}
+
+
+def law_from_function(model: Model, serialized: str) -> ca.SX:
+    """The law expression in ``model.x`` of a serialized law Function (see
+    :func:`law_identity`)."""
+    return ca.Function.deserialize(serialized)(model.x)
+
+
+def _claim(model: Model, Wb: Any) -> str:
+    """The invariance claim, saying which disturbances it covers."""
+    body = ": f(x, law(x), w) in S and law(x) in U = " + _box_text(model.U)
+    if not model.l:
+        return "for every x in S" + body.replace(", w)", ")")
+    if np.array_equal(Wb.lo, Wb.hi):
+        return (f"for every x in S with w = {Wb.lo.tolist()} only (nominal: no other w "
+                "is covered)" + body)
+    return f"for every x in S and every w in W = {_box_text(Wb)} (robust)" + body
+
+
+def _box_text(B: Any) -> str:
+    return f"[{np.asarray(B.lo).tolist()}, {np.asarray(B.hi).tolist()}]"
+
+
+def check_about(cert: Any, model: Model, S: Any, W: Any, law: Any = None) -> str | None:
+    """Why an invariance certificate does not support "S is invariant for ``model`` under
+    its law for every w in W" (None when it does).
+
+    The certificate must be a proved one of :func:`certify_invariant` about the same
+    model (map), the very set S (same rows), a disturbance box containing W (W None: no
+    disturbance), and, when ``law`` is given, the same law expression."""
+    if not isinstance(cert, Certificate) or cert.proved is not True:
+        return "it is not a proved Certificate"
+    ab = cert.about or {}
+    if ab.get("kind") != "invariance":
+        return ("it does not say what it is about (a Certificate of cm.certify_invariant "
+                "records the model, the set, the law and W)")
+    if ab.get("model_key") != model_key(model):
+        return f"it is about another model ('{ab.get('model')}'), not '{model.name}'"
+    T = ab.get("set")
+    same = T is S or (type(T) is type(S) and all(
+        np.array_equal(np.asarray(getattr(T, a)), np.asarray(getattr(S, a)))
+        for a in (("A", "b") if isinstance(S, Polytope) else ("center", "generators"))))
+    if not same:
+        return "it is about another set than this one"
+    if law is not None and law_identity(model, law)["law_key"] != ab.get("law_key"):
+        return (f"it proves the law u = {ab.get('law')}, not the one given "
+                f"(u = {law_identity(model, law)['law']})")
+    Wc = ab.get("W")
+    if model.l and W is not None:
+        if Wc is None or not (np.all(np.asarray(Wc.lo) <= np.asarray(W.lo))
+                              and np.all(np.asarray(W.hi) <= np.asarray(Wc.hi))):
+            return (f"it covers w in {None if Wc is None else _box_text(Wc)} only, not "
+                    f"W = {_box_text(W)}")
+    return None
+
+
 def _certify(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W: Any,
              max_boxes: int, time_limit: float | None, samples: int, seed: int,
-             progress: bool | None) -> Certificate:
-    """certify_invariant after validation, with the closed loop given."""
+             progress: bool | None, law: Any = None) -> Certificate:
+    """certify_invariant after validation, with the closed loop given; the certificate
+    records what it is about (see :attr:`Certificate.about`)."""
+    import dataclasses
+
+    Wb = W if W is not None else model.W
+    cert = _certify_core(model, closed, S, eps, Wb, max_boxes, time_limit, samples, seed,
+                         progress)
+    about: dict[str, Any] = {"kind": "invariance", "model": model.name,
+                             "model_key": model_key(model), "set": S,
+                             "W": Wb if model.l else None,
+                             "robust": bool(model.l) and not np.array_equal(Wb.lo, Wb.hi),
+                             "U": model.U}
+    if law is not None:
+        about.update(law_identity(model, law))
+    return dataclasses.replace(cert, about=about)
+
+
+def _certify_core(model: Model, closed: tuple[Model, Any], S: Any, eps: float, Wb: Any,
+                  max_boxes: int, time_limit: float | None, samples: int, seed: int,
+                  progress: bool | None) -> Certificate:
     from ..solvers.zonotope_sivia import zonotope_sivia
 
     t0 = time.perf_counter()
     cl, law_fun = closed
-    Wb = W if W is not None else model.W
-    claim = ("for every x in S" + (" and every w in W" if model.l else "")
-             + ": f(x, law(x), w) in S and law(x) in U")
+    claim = _claim(model, Wb)
     rng = np.random.default_rng(seed)
     w_pts = (np.asarray(Wb.vertices()) if model.l else np.zeros((1, 0)))
     details: dict[str, Any] = {}
+    # the pieces cover a zonotope proven to contain S; pieces proven disjoint from S are
+    # left out, the others must satisfy the conditions on the whole piece (sufficient)
+    Z0, how = _domain(S)
+    details["domain"] = how
     # a cheap search first: vertices and random points of S
-    cert = _point_counterexample(_sample_points(S, samples, rng), S, model, cl, law_fun, w_pts,
-                                 claim, details)
+    pts = _sample_points(S, Z0 if Z0 is not None else S if isinstance(S, Zonotope)
+                         else Zonotope(np.zeros(model.n), np.eye(model.n)), samples, rng)
+    cert = _point_counterexample(pts, S, model, cl, law_fun, w_pts, claim, details)
     if cert is not None:
         details["seconds"] = time.perf_counter() - t0
         details["stage"] = "sampled points of S (before the set inversion)"
         return cert
-    # the pieces cover a zonotope around S; pieces proven disjoint from S are left out,
-    # the others must satisfy the conditions on the whole piece (sufficient)
-    Z0 = _domain(S)
+    if Z0 is None:
+        details["seconds"] = time.perf_counter() - t0
+        return Certificate(
+            "undecided", None, claim,
+            "no zonotope could be proven to contain S (an ill-conditioned S: floating-point "
+            "inverses and vertices do not enclose it provably), so no part of S can be "
+            "skipped; no counterexample found among sampled points", details)
     runs = {
         "state set": zonotope_sivia(cl, Z0, S, eps, W=Wb, max_boxes=max_boxes,
                                     time_limit=time_limit, progress=progress),
@@ -574,7 +732,7 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
                 left = None if time_limit is None else max(time_limit - elapsed, 1e-3)
                 t1 = time.perf_counter()
                 cert = _certify(model, closed, Z, eps, W, max_boxes, left, samples, seed,
-                                False)
+                                False, law=law)
                 st["certify_seconds"] += time.perf_counter() - t1
                 st["tested"] += 1
                 if cert.proved is True:

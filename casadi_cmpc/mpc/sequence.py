@@ -42,6 +42,12 @@ def _members(S: Any) -> list[Any]:
     return list(getattr(S, "members", None) or getattr(S, "polytopes", None) or [S])
 
 
+def _model_key(model: Model) -> str:
+    from ..control.invariance import model_key
+
+    return model_key(model)
+
+
 def _first_max(c: np.ndarray) -> int:
     """Index of the first largest finite entry of c (0 when none is finite); the C export
     picks the same."""
@@ -111,8 +117,12 @@ class SetSequenceMPC:
     R : array_like (m, m), optional
         Weight of the control (default identity).
     local_law : array_like (m, n) or casadi.SX, optional
-        The law applied inside ``T = seq[0]`` (default: ``seq.info["law"]`` if present); a
-        gain ``K`` (``u = K x``) or an expression of ``model.x``.
+        The law applied inside ``T = seq[0]``; a gain ``K`` (``u = K x``) or an expression
+        of ``model.x``. Default: the law T was proven invariant under (stored with the
+        sequence by :func:`casadi_cmpc.controllable_sets`). A law other than that one is
+        refused (ValueError): T's invariance was proven for its law only. With a sequence
+        that holds no proven law (``assume_invariant=True``) the given law is applied and
+        its answers say "not proven".
     solver : {"ipopt", "sqp"}
         Local solver of the one-step problem (built once, the state as parameter).
     robust : bool, optional
@@ -190,7 +200,6 @@ class SetSequenceMPC:
                  x_ref: Any = None, solver_options: dict | None = None,
                  minimax: str = "auto", minimax_options: dict | None = None) -> None:
         from ..control.controllable import _Target, _w_setup
-        from ..control.invariance import _law_expr
 
         if not isinstance(model, Model):
             raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
@@ -213,10 +222,7 @@ class SetSequenceMPC:
         if robust is None:
             robust = bool(seq.info.get("robust", model.l > 0))
         self.robust = bool(robust) and model.l > 0
-        law = local_law if local_law is not None else seq.info.get("law")
-        self._law = None
-        if law is not None:
-            self._law = ca.Function("law", [model.x], [_law_expr(model, law)])
+        self._law, self._law_proved = self._local_law(local_law)
         self._Wbox, _, _ = _w_setup(model, self.robust, None)
         self._w_vertices = (np.asarray(model.W.vertices()) if self.robust else
                             self._Wbox[:, 0][None]) if model.l else np.zeros((1, 0))
@@ -242,6 +248,39 @@ class SetSequenceMPC:
         self.contract = np.eye(n)  # the whole state is driven to x_ref (for reports)
         self.last_info: dict[str, Any] = {}
         self._xnext: np.ndarray | None = None
+
+    def _local_law(self, local_law: Any) -> tuple[ca.Function | None, bool]:
+        """The law applied in T and whether T is proven invariant under it (for the W this
+        controller claims). A law other than the one T was proven with is refused."""
+        from ..control.invariance import _law_expr, law_from_function, law_identity
+
+        model, info = self.model, self.seq.info
+        key = info.get("terminal_law_key")
+        same_model = info.get("model_key") == _model_key(model)
+        if local_law is not None:
+            given = law_identity(model, local_law)
+            if key and given["law_key"] != key:
+                raise ValueError(
+                    f"local_law (u = {given['law']}) is not the law the terminal set was "
+                    f"proven invariant under (u = {info.get('terminal_law')}); omit local_law "
+                    "to apply the proven law, or certify T under your law and compute the "
+                    "sequence with it")
+            expr = _law_expr(model, local_law)
+        elif key:
+            expr = law_from_function(model, info["terminal_law_function"])
+        elif info.get("law") is not None:
+            expr = _law_expr(model, info["law"])
+        else:
+            return None, False
+        # T's certificate is about the model of the sequence: for another model (another
+        # map f) the law's answers say "not proven"
+        proved = bool(key) and same_model and info.get("terminal_certificate") == "proved"
+        if proved and self.robust:
+            Wc = info.get("terminal_W")
+            proved = Wc is not None and bool(
+                np.all(np.asarray(Wc[0]) <= model.W.lo)
+                and np.all(model.W.hi <= np.asarray(Wc[1])))
+        return ca.Function("law", [model.x], [expr]), proved
 
     def _resolve_minimax(self, minimax: Any) -> str:
         if not isinstance(minimax, str) or minimax.lower() not in _MINIMAX_MODES:
@@ -428,6 +467,16 @@ class SetSequenceMPC:
         """Forget the previous call (the controller keeps no state between calls)."""
         self.last_info = {}
 
+    def _w_claim(self) -> str:
+        """Which disturbances a claim of this controller covers."""
+        if not self.model.l:
+            return ""
+        if self.robust:
+            return (f" for all w in W = [{self.model.W.lo.tolist()}, "
+                    f"{self.model.W.hi.tolist()}] (robust)")
+        return (f" for w = {self._Wbox[:, 0].tolist()} only (nominal: the centre of W; "
+                "other w are not checked)")
+
     # ---------------------------------------------------------------- calls
     def __call__(self, x: Any) -> np.ndarray:
         """The control to apply at ``x`` (m,); raises ValueError when x is not controllable
@@ -462,14 +511,20 @@ class SetSequenceMPC:
             if self._law is None:
                 raise ValueError("x lies in the terminal set but no local_law was given")
             u = np.asarray(self._law(x), dtype=float).reshape(m)
-            cert = Certificate("local_law", True if self.seq.info.get(
-                "terminal_certificate") == "proved" else None,
-                "x in T: the local law keeps the state in T",
-                "T is proven invariant under the local law" if self.seq.info.get(
-                    "terminal_certificate") == "proved" else
-                "the invariance of T under the law was not proven here")
+            cert = Certificate(
+                "local_law", True if self._law_proved else None,
+                "x in T: the local law keeps the state in T" + self._w_claim(),
+                f"T is proven invariant under this law ({self.seq.info.get('terminal_claim')})"
+                if self._law_proved else
+                "the invariance of T under this law was not proven "
+                + ("for this model (the sequence was computed for "
+                   f"'{self.seq.info.get('model')}', another map f)"
+                   if self.seq.info.get("model_key") not in (None, _model_key(self.model))
+                   else "for all w in W (the certificate of T covers "
+                   f"{self.seq.info.get('terminal_W')})" if self.seq.info.get(
+                       "terminal_law_key") else "(the sequence holds no proven law)"))
             return self._done(x, u, self._cost(x, u), 0, cert, stats, "local_law",
-                              Status.PROVED, t0)
+                              Status.PROVED if self._law_proved else Status.UNDECIDED, t0)
         # ---------------- one-step problem into K_{lvl - 1}
         j = lvl - 1
         u_w = None if wit is None else np.asarray(wit[1], dtype=float).reshape(m)
@@ -493,7 +548,7 @@ class SetSequenceMPC:
             if mm.u_feasible and mm.u is not None:
                 cands.insert(0, (np.asarray(mm.u, dtype=float).reshape(m), "interval minimax"))
         if not cands:
-            cert = Certificate("undecided", None, f"f(x, u, W) in K_{j}",
+            cert = Certificate("undecided", None, f"f(x, u, w) in K_{j}" + self._w_claim(),
                                "the solver failed and no proving control is stored")
             return self._done(x, nan_u, np.nan, lvl, cert, stats, "mpc", Status.NUMERICAL,
                               t0)
@@ -511,7 +566,7 @@ class SetSequenceMPC:
         if k.size == 0:
             u = C[-1] if u_w is not None else C[0]
             self._cost_bounds(x, u, mm, False, stats)
-            cert = Certificate("unverified", None, f"f(x, u, W) in K_{j}",
+            cert = Certificate("unverified", None, f"f(x, u, w) in K_{j}" + self._w_claim(),
                                "no candidate control could be certified")
             return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc",
                               Status.UNDECIDED, t0)
@@ -519,7 +574,7 @@ class SetSequenceMPC:
         if mm is not None and mm.u_feasible and src != "interval minimax":
             u, src = self._toward_minimax(x, j, u, src, np.asarray(mm.u, dtype=float), stats)
         self._cost_bounds(x, u, mm, src == "interval minimax", stats)
-        cert = Certificate("verified", True, f"f(x, u, w) in K_{j} for all w in W",
+        cert = Certificate("verified", True, f"f(x, u, w) in K_{j}" + self._w_claim(),
                            f"interval evaluation at x with u from the {src}",
                            {"candidates": int(C.shape[0]), "chosen": int(k[0]),
                             "source": src})

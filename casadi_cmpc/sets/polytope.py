@@ -345,8 +345,12 @@ class Polytope(SetBase):
         ----------
         points : array_like, shape (N, n) or (n,)
         tol : float, optional
-            Absolute tolerance added to every right-hand side (default 0: exact test in
-            floating point).
+            Absolute tolerance added to every right-hand side (a plain floating-point
+            test, nothing claimed). With the default 0 the test is exact: ``A p <= b`` for
+            the stored float ``A``, ``b`` and ``p`` taken as exact numbers (a floating-point
+            test with an error bound decides the points away from the facets, exact
+            rational arithmetic the others), so that a point one ulp outside a facet is
+            outside.
 
         Returns
         -------
@@ -354,7 +358,10 @@ class Polytope(SetBase):
             A single bool for one unbatched point.
         """
         p, batched = as_points(points, self.dim, name="points")
-        inside = points_le(p, self.A, self.b + float(tol))
+        if tol != 0.0:
+            inside = points_le(p, self.A, self.b + float(tol))
+        else:
+            inside = exact_points_le(p, self.A, self.b)
         return inside if batched else bool(inside[0])
 
     # ------------------------------------------------------ LP-based queries
@@ -1533,6 +1540,46 @@ def _residual(A: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, 
         res[plain] = b[plain] - A[plain] @ c
         err[plain] = _gamma(n + 2) * (np.abs(b[plain]) + np.abs(A[plain]) @ np.abs(c)) + 1e-300
     return res, err
+
+
+def exact_points_le(X: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``all(A x <= b)`` decided exactly for each row x of X (N, n) -> (N,) bool.
+
+    The floating-point residuals ``A x - b`` with the bound ``gamma_{n+2} (|A| |x| + |b|)``
+    of their rounding error decide every row they can; a point with a row inside that
+    bound is decided in exact rational arithmetic (the float data taken as exact). Rows
+    with ``b = +inf`` hold everywhere, ``b = -inf`` nowhere; a non-finite point is decided
+    in plain floating point.
+    """
+    N, n = X.shape
+    if A.shape[0] == 0 or N == 0:
+        return np.ones(N, dtype=bool)
+    with np.errstate(over="ignore", invalid="ignore"):
+        S = X @ A.T - b[None, :]
+        mag = np.abs(X) @ np.abs(A).T + np.abs(b)[None, :]
+        err = _gamma(n + 2) * mag + 1e-300
+    sure_in = (S <= -err) | (b[None, :] == np.inf)
+    sure_out = (S > err) | (b[None, :] == -np.inf)
+    inside = sure_in.all(axis=1)
+    out = sure_out.any(axis=1)
+    undecided = np.flatnonzero(~inside & ~out)
+    if undecided.size:
+        finite = np.isfinite(X[undecided]).all(axis=1)
+        plain = undecided[~finite]
+        inside[plain] = ((X[plain] @ A.T) <= b[None, :]).all(axis=1)
+        rows: dict[int, tuple[list[Fraction], Fraction]] = {}
+        for k in undecided[finite]:
+            xk = [Fraction(float(v)) for v in X[k]]
+            ok = True
+            for i in np.flatnonzero(~sure_in[k]).tolist():
+                if i not in rows:
+                    rows[i] = ([Fraction(float(a)) for a in A[i]], Fraction(float(b[i])))
+                ai, bi = rows[i]
+                if sum((a * x for a, x in zip(ai, xk, strict=True)), Fraction(0)) > bi:
+                    ok = False
+                    break
+            inside[k] = ok
+    return inside
 
 
 def _frac_up(v: Fraction) -> float:

@@ -691,6 +691,67 @@ class Zonotope(SetBase):
         raise TypeError(f"contained_in() takes a Polytope, Box or Zonotope; got "
                         f"{type(other).__name__}")
 
+    def contains_polytope(self, P: Polytope) -> bool | None:
+        """Proven inclusion ``P ⊆ Z`` of a bounded polytope in this zonotope.
+
+        ``Z`` is the intersection of its facet slabs ``-h_Z(-a) <= a.x <= h_Z(a)`` over the
+        exact facet normals ``a`` (each enclosed by an interval ``[Nlo, Nhi]``). For each
+        facet, ``h_P(a) <= h_P(m) + sum_j max|a_j - m_j| max(|lo_j|, |hi_j|)`` with ``m`` a
+        float direction inside the interval, ``h_P(m)`` the rigorous LP-dual upper bound of
+        :meth:`Polytope._support_upper` and ``[lo, hi]`` a rigorous bounding box of P; the
+        sum is evaluated in exact rational arithmetic and compared with the lower bound of
+        ``h_Z(a)``. No floating-point vertex or inverse enters the decision.
+
+        Parameters
+        ----------
+        P : Polytope
+            Of the zonotope's dimension.
+
+        Returns
+        -------
+        bool or None
+            True: ``P ⊆ Z`` is proven. None: not proven (the zonotope is flat or has too
+            many facets, P is unbounded or an LP failed, or the bounds are too loose);
+            the inclusion may still hold. False is never returned.
+        """
+        from fractions import Fraction
+
+        if not isinstance(P, Polytope):
+            raise TypeError(f"contains_polytope() takes a Polytope; got {type(P).__name__}")
+        if P.dim != self.dim:
+            raise DimensionError(f"P has dimension {P.dim}; expected {self.dim}")
+        if not self._full_rank:
+            return None
+        data = self._facet_data()
+        if data is None:
+            return None
+        n = self.dim
+        Nlo, Nhi = data["Nlo"], data["Nhi"]
+        M = 0.5 * Nlo + 0.5 * Nhi
+        M = np.where((M >= Nlo) & (M <= Nhi), M, Nlo)
+        E = np.vstack([np.eye(n), -np.eye(n)])
+        try:
+            h = P._support_upper(np.vstack([E, M, -M]))
+        except Exception:  # an LP the solver could not take: not proven
+            return None
+        if not (np.isfinite(h).all() and np.isfinite(data["hp_lo"]).all()
+                and np.isfinite(data["hm_lo"]).all() and np.isfinite(M).all()):
+            return None
+        hi, lo = h[:n], -h[n:2 * n]
+        F = M.shape[0]
+        hp, hm = h[2 * n:2 * n + F], h[2 * n + F:]
+        ext = [max(abs(Fraction(float(a))), abs(Fraction(float(b))))
+               for a, b in zip(lo, hi, strict=True)]
+        for f in range(F):
+            r = sum((max(abs(Fraction(float(Nlo[f, j])) - Fraction(float(M[f, j]))),
+                         abs(Fraction(float(Nhi[f, j])) - Fraction(float(M[f, j]))))
+                     * ext[j] for j in range(n)), Fraction(0))
+            if Fraction(float(hp[f])) + r > Fraction(float(data["hp_lo"][f])):
+                return None
+            if Fraction(float(hm[f])) + r > Fraction(float(data["hm_lo"][f])):
+                return None
+        return True
+
     # --------------------------------------------------------------- bisection
     def bisect(self, index: int | None = None, cover: bool = True
                ) -> tuple[Zonotope, Zonotope]:

@@ -355,6 +355,15 @@ class Certificate:
         the optimality bracket when requested.
     counterexample : ndarray or None
         A point that disproves the claim, when one was found.
+    about : dict
+        What the claim is about, for consumers that rely on it (empty when the claim
+        is about one answer only). An invariance certificate
+        (:func:`~casadi_cmpc.certify_invariant`) holds ``kind`` (``"invariance"``),
+        ``model`` (name), ``model_key`` (a hash of the model's map), ``set`` (the set S),
+        ``law`` (the law as text), ``law_key`` (a hash of the law's expression in the
+        model's x), ``law_function`` (the law as a serialized CasADi Function), ``W``
+        (the disturbance Box the proof covers, None without w) and ``robust`` (True when
+        that box is not a single point).
     """
 
     label: str
@@ -363,6 +372,7 @@ class Certificate:
     reason: str
     details: dict = field(default_factory=dict)
     counterexample: np.ndarray | None = None
+    about: dict = field(default_factory=dict)
 
     def __repr__(self) -> str:
         return f"Certificate({self.label!r}, proved={self.proved}, reason={self.reason!r})"
