@@ -56,6 +56,10 @@ def _obstacle_distances(traj: Any, run: dict) -> np.ndarray | None:
     return d.min(axis=1)
 
 
+# bumped when what a cached sequence holds changes (2: the proven law of T is stored)
+_SEQUENCE_FORMAT = "sequence-format-2"
+
+
 def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     """A file name that changes with the model, T, the law and the settings."""
     import hashlib
@@ -67,7 +71,7 @@ def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     for part in (ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
                  np.asarray(ex.terminal.b).tobytes(), np.asarray(ex.local_law).tobytes(),
                  repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
-                 __version__):
+                 __version__, _SEQUENCE_FORMAT):
         h.update(part if isinstance(part, bytes) else str(part).encode())
     base = Path(cache) if cache else Path(os.environ.get(
         "XDG_CACHE_HOME", Path.home() / ".cache")) / "casadi_cmpc"
