@@ -559,7 +559,9 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
         return Certificate("assumed", None, "T is control invariant",
                            "assume_invariant=True: not proven; the sets are then inner "
                            "approximations of the i-step sets only if T is invariant")
-    W_need = (model.W if robust else Box(model.W.mid, model.W.mid)) if model.l else None
+    # the nominal w is the centre the one-step sets use (see _w_setup)
+    Wc = _w_setup(model, robust, None)[0] if model.l else None
+    W_need = (model.W if robust else Box(Wc[:, 0], Wc[:, 1])) if model.l else None
     if certificate is not None:
         from .invariance import check_about
 

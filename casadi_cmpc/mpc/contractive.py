@@ -1183,8 +1183,8 @@ class ContractiveMPC:
             details["proofs"] = proofs
         claim = self._claims.get(N)
         if claim is None:
-            w = (f" with the nominal disturbance w = {self.w_nominal.tolist()}"
-                 if self.model.l else "")
+            w = (f" with the nominal disturbance w = {self.w_nominal.tolist()} only (other "
+                 "w in W are not covered)" if self.model.l else "")
             claim = self._claims[N] = (
                 f"the sequence keeps x(1..{N}) in X, satisfies every extra constraint and "
                 f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}")

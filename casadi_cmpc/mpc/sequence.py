@@ -222,8 +222,8 @@ class SetSequenceMPC:
         if robust is None:
             robust = bool(seq.info.get("robust", model.l > 0))
         self.robust = bool(robust) and model.l > 0
-        self._law, self._law_proved = self._local_law(local_law)
         self._Wbox, _, _ = _w_setup(model, self.robust, None)
+        self._law, self._law_proved = self._local_law(local_law)
         self._w_vertices = (np.asarray(model.W.vertices()) if self.robust else
                             self._Wbox[:, 0][None]) if model.l else np.zeros((1, 0))
         self._targets: dict[int, Any] = {}
@@ -275,11 +275,12 @@ class SetSequenceMPC:
         # T's certificate is about the model of the sequence: for another model (another
         # map f) the law's answers say "not proven"
         proved = bool(key) and same_model and info.get("terminal_certificate") == "proved"
-        if proved and self.robust:
+        if proved and model.l:  # T's certificate must cover the w this controller claims
             Wc = info.get("terminal_W")
+            need = self._Wbox
             proved = Wc is not None and bool(
-                np.all(np.asarray(Wc[0]) <= model.W.lo)
-                and np.all(model.W.hi <= np.asarray(Wc[1])))
+                np.all(np.asarray(Wc[0]) <= need[:, 0])
+                and np.all(need[:, 1] <= np.asarray(Wc[1])))
         return ca.Function("law", [model.x], [expr]), proved
 
     def _resolve_minimax(self, minimax: Any) -> str:

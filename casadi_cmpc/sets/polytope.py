@@ -1066,9 +1066,11 @@ class Polytope(SetBase):
     def affine_map(self, M: Any, t: Any = None) -> Polytope:
         """Image ``{M x + t : x in P}`` under an affine map.
 
-        Invertible square ``M`` (condition number ``< 1e10``): exact in H-representation,
-        ``{y : A M^{-1} y <= b + A M^{-1} t}``. Otherwise the image of the vertices (bounded
-        P) or the projection of the lifted set ``{(x, y) : A x <= b, y = M x + t}``
+        Invertible square ``M`` (condition number ``< 1e10``): the H-representation
+        ``{y : A M^{-1} y <= b + A M^{-1} t}`` computed in floating point (equal to the
+        image up to rounding; not a proven inner or outer set). Otherwise the image of the
+        vertices (bounded P) or the projection of the lifted set
+        ``{(x, y) : A x <= b, y = M x + t}``
         (unbounded P, by block elimination).
 
         Parameters
@@ -1105,7 +1107,9 @@ class Polytope(SetBase):
                                                     method="elimination")
 
     def inverse_image(self, M: Any, t: Any = None) -> Polytope:
-        """Pre-image ``{x : M x + t in P}`` (exact in H-representation).
+        """Pre-image ``{x : M x + t in P}`` in floating point (rows ``A M`` and offsets
+        ``b - A t`` rounded to nearest: equal to the exact pre-image up to that rounding,
+        not a proven inner or outer set; :func:`casadi_cmpc.pre_set` gives a proven one).
 
         Parameters
         ----------
@@ -1154,9 +1158,13 @@ class Polytope(SetBase):
         return Polytope(lifted_A, lifted_b).project(list(range(n, 2 * n)))
 
     def pontryagin_difference(self, other: Any) -> Polytope:
-        """Pontryagin difference ``P ⊖ Q = {x : x + Q ⊆ P}`` (exact in H-representation).
+        """Pontryagin difference ``P ⊖ Q = {x : x + Q ⊆ P}``, never larger than the truth.
 
-        ``{x : a_i.x <= b_i - h_Q(a_i)}`` with ``h_Q`` the support function of Q.
+        ``{x : a_i.x <= b_i - h_i}`` with ``h_i >= h_Q(a_i)`` a rigorous upper bound of the
+        support function of Q (exact LP-dual bounds for a Polytope, outward-rounded sums for
+        a Box or a Zonotope) and the offsets rounded downward: an inner approximation of the
+        exact difference, equal to it up to these roundings. For other sets the support
+        value is widened by ``1e-12`` relative (not a proof).
 
         Parameters
         ----------
@@ -1175,10 +1183,9 @@ class Polytope(SetBase):
         R = self._rows()
         if R.empty:
             return Polytope.empty(n)
-        h = np.atleast_1d(np.asarray(other.support(R.A), dtype=float)) if R.A.shape[0] else \
-            np.zeros(0)
+        h = _support_up(other, R.A) if R.A.shape[0] else np.zeros(0)
         with np.errstate(invalid="ignore"):
-            b = R.b - h
+            b = np.nextafter(R.b - h, -np.inf)
         return Polytope(R.A, np.where(np.isnan(b), -np.inf, b))
 
     def __add__(self, other: Any) -> Polytope:
@@ -1214,7 +1221,9 @@ class Polytope(SetBase):
 
     # -------------------------------------------------------- projection
     def project(self, dims: Sequence[int], method: str = "auto") -> Polytope:
-        """Exact projection ``{x_dims : x in P}`` onto a subset of the coordinates.
+        """Projection ``{x_dims : x in P}`` onto a subset of the coordinates, in floating
+        point (LPs and vertex enumeration, equal to the projection up to the tolerances
+        below; not a proven inner or outer set).
 
         Parameters
         ----------
@@ -1540,6 +1549,26 @@ def _residual(A: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, 
         res[plain] = b[plain] - A[plain] @ c
         err[plain] = _gamma(n + 2) * (np.abs(b[plain]) + np.abs(A[plain]) @ np.abs(c)) + 1e-300
     return res, err
+
+
+def _support_up(Q: Any, D: np.ndarray) -> np.ndarray:
+    """Upper bounds of the support function of Q in the directions D (k, n)."""
+    from .zonotope import Zonotope
+
+    if isinstance(Q, Polytope):
+        if Q.is_empty():
+            return np.full(D.shape[0], -np.inf)
+        return Q._support_upper(D)
+    if isinstance(Q, Zonotope):
+        return Q._support_upper(D)
+    if isinstance(Q, Box):
+        with np.errstate(invalid="ignore"):
+            t = np.where(D == 0, 0.0, np.maximum(D * Q.lo, D * Q.hi))
+            s = t.sum(axis=1)
+            return s + (_gamma(D.shape[1] + 1) * np.abs(t).sum(axis=1) + 1e-300)
+    h = np.atleast_1d(np.asarray(Q.support(D), dtype=float))
+    with np.errstate(invalid="ignore"):
+        return h + (1e-12 * np.abs(h) + 4 * np.abs(np.spacing(h)))
 
 
 def exact_points_le(X: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -191,3 +191,26 @@ def test_level_of_T_is_exact(n: int, seed: int, steps: int) -> None:
     assert bool(P.contains(x)) == exact
     assert (seq.level(x) == 0) == exact
     assert (seq.locate(x)[0] == 0) == exact
+
+
+def test_contractive_claims_name_the_nominal_w_and_hold_exactly() -> None:
+    m = _model()
+    ctrl = cm.ContractiveMPC(m, horizon=3, alpha=0.9, norm=2, solver="sqp")
+    rng = np.random.default_rng(1)
+    n_ver = 0
+    for x in rng.uniform(-3.0, 3.0, (20, 2)):
+        r = ctrl.solve(x)
+        c = r.certificate
+        if c.label != "verified":
+            continue
+        assert "nominal disturbance w = [0.0] only" in c.claim and "for all w" not in c.claim
+        # the sequence from x with w = 0, exactly: every state in X, contraction of |x|_2
+        xs = [[F(float(v)) for v in x]]
+        for u in r.u_seq:
+            xs.append([F(1, 2) * xs[-1][0] + F(float(u[0])), F(1, 2) * xs[-1][1]])
+        for y in xs[1:]:
+            assert all(F(-4) <= v <= F(4) for v in y)
+        sq = [sum(v * v for v in y) for y in xs]
+        assert sq[-1] <= F(0.9) ** 2 * sq[0]
+        n_ver += 1
+    assert n_ver > 5
