@@ -528,24 +528,59 @@ class Model:
             raise ModelError(f"model '{self.name}' has no affine control part g(x, w) + B u")
         return np.asarray(ca.DM(ca.evalf(self._jac("u")))).reshape(self.n, self.m)
 
-    def linear_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(A, B, E, c)`` with ``f = A x + B u + E w + c`` for a linear model.
+    def linear_enclosures(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Rigorous enclosures of ``(A, B, E, c)`` with ``f = A x + B u + E w + c``.
 
-        Raises ModelError when the model is not linear.
+        Computed from the exact interval source of f (:meth:`interval_map`: the literals of
+        f, and of a closed loop's law, are exact; nothing is folded in floating point): the
+        interval Jacobians (constant for a linear model) and the natural inclusion of f at
+        the origin, each at the thin point 0.
+
+        Returns
+        -------
+        A, B, E, c : ndarray, shapes (n, n, 2), (n, m, 2), (n, l, 2), (n, 2)
+            Interval entries ``[lo, hi]`` holding the exact coefficients.
+
+        Raises
+        ------
+        ModelError
+            The model is not linear.
         """
         if not self.is_linear:
             raise ModelError(f"model '{self.name}' is not linear in (x, u, w)")
 
-        def const(e: ca.SX, rows: int, cols: int) -> np.ndarray:
-            return np.asarray(ca.DM(ca.evalf(e))).reshape(rows, cols) if cols else np.zeros(
-                (rows, 0))
+        def build() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            n, m, l = self.n, self.m, self.l
+            args = (np.zeros((1, n, 2)), np.zeros((1, m, 2)) if m else None,
+                    np.zeros((1, l, 2)) if l else None)
 
-        A = const(self._jac("x"), self.n, self.n)
-        B = const(self._jac("u"), self.n, self.m)
-        E = const(self._jac("w"), self.n, self.l) if self.w is not None else np.zeros((self.n, 0))
-        zero = [ca.DM.zeros(s.shape) for s in self._all_syms()]
-        c = np.asarray(ca.DM(ca.evalf(ca.substitute([self.f], self._all_syms(), zero)[0])))
-        return A, B, E, c.reshape(self.n)
+            def jac(wrt: str, d: int) -> np.ndarray:
+                if d == 0:
+                    return np.zeros((n, 0, 2))
+                return np.asarray(self.jacobian_inclusion(wrt)(*args), dtype=float)[0]
+
+            c = np.asarray(self.inclusion("natural")(*args), dtype=float)[0]
+            return jac("x", n), jac("u", m), jac("w", l), c
+
+        return self._cached("linear_enclosures", build)
+
+    def linear_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(A, B, E, c)`` with ``f = A x + B u + E w + c`` for a linear model.
+
+        The midpoints of :meth:`linear_enclosures` (exact where those are thin, as for
+        literal coefficients; otherwise within their width of the exact values, and
+        computed from the exact graph, never from a folded one).
+
+        Raises ModelError when the model is not linear.
+        """
+        A, B, E, c = self.linear_enclosures()
+
+        def mid(M: np.ndarray) -> np.ndarray:
+            with np.errstate(invalid="ignore", over="ignore"):
+                v = 0.5 * M[..., 0] + 0.5 * M[..., 1]
+            return np.where(M[..., 0] == M[..., 1], M[..., 0], v)
+
+        return mid(A), mid(B), mid(E), mid(c)
 
     # ------------------------------------------------------------- closed loop
     def closed_loop(self, law: Any, name: str | None = None) -> Model:

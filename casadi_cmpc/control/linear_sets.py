@@ -56,6 +56,29 @@ def _check_linear(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     return model.linear_matrices()
 
 
+def _exact_coefficients(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray]:
+    """``(A, B, E, c_mid, c_rad)`` of a linear model for an exact pre-set: A, B, E must be
+    known exactly (thin enclosures, e.g. literal coefficients); c may be an interval
+    (``|c - c_mid| <= c_rad``, entrywise), which the target rows absorb."""
+    _check_linear(model)
+    A, B, E, c = model.linear_enclosures()
+    for name, M in (("A", A), ("B", B), ("E", E)):
+        if not (np.isfinite(M).all() and (M[..., 0] == M[..., 1]).all()):
+            raise ModelError(
+                f"the coefficient matrix {name} of model '{model.name}' is not known exactly "
+                "in floating point (a coefficient computed from constants, e.g. "
+                "0.1 * 0.3 * x, or folded by a closed loop): an exact pre-set needs exact "
+                "coefficients; write f with literal coefficients")
+    if not np.isfinite(c).all():
+        raise ModelError(f"the constant term of model '{model.name}' has no finite enclosure")
+    cm_ = 0.5 * c[:, 0] + 0.5 * c[:, 1]
+    cm_ = np.where(c[:, 0] == c[:, 1], c[:, 0], cm_)
+    rad = np.maximum(c[:, 1] - cm_, cm_ - c[:, 0])
+    rad = np.nextafter(rad, np.inf) * (rad > 0)
+    return A[..., 0], B[..., 0], E[..., 0], cm_, rad
+
+
 def _fr(M: np.ndarray) -> list:
     """Floats (any shape) as nested lists of exact Fractions."""
     return np.vectorize(lambda v: Fraction(float(v)), otypes=[object])(
@@ -100,13 +123,15 @@ def _pre_rows(model: Model, H: np.ndarray, h: np.ndarray, within_X: bool
     ``S_m ∩ Y_m`` is ``s + g`` with ``s = y - g`` in ``S_{m-1} ∩ Y_{m-1}``; the box rows
     keep every stage bounded and let nearly parallel rows be proven redundant.
     """
-    A, B, E, c = _check_linear(model)
+    A, B, E, c, c_rad = _exact_coefficients(model)
     n, m, nl = model.n, model.m, model.l
     Af, Bf, Ef, cf = _fr(A), _fr(B.reshape(n, m)), _fr(E.reshape(n, nl)), _fr(c)
+    cr = _fr(c_rad)
     zero = Fraction(0)
     rows: list[ExactRow] = []
     for Hi_f, hi_f in zip(_fr(H), _fr(h), strict=True):
-        beta = hi_f - sum((Hi_f[k] * cf[k] for k in range(n)), zero)
+        # the constant term is only known within c_rad: the row holds for all of it
+        beta = hi_f - sum((Hi_f[k] * cf[k] + abs(Hi_f[k]) * cr[k] for k in range(n)), zero)
         if nl:
             W = model.W
             for j, (wl, wh) in enumerate(zip(_fr(W.lo), _fr(W.hi), strict=True)):

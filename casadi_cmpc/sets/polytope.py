@@ -875,7 +875,9 @@ class Polytope(SetBase):
                 rows, rhs = [R.A], [R.b]
                 for k in range(1, n):
                     for T in itertools.combinations(range(n), k):
-                        Q = self.project(list(T), method="support")
+                        # a bounded effort: an ill-conditioned P whose projection does
+                        # not settle falls back to the general stages (conservative)
+                        Q = self._project_support(list(T), max_rounds=60)
                         QR = Q._rows()
                         lifted = np.zeros((QR.A.shape[0], n))
                         lifted[:, list(T)] = QR.A
@@ -1290,7 +1292,9 @@ class Polytope(SetBase):
             return Polytope.from_vertices(self.vertices()[:, dl])
         return self._project_support(dl)
 
-    def _project_support(self, dims: list[int]) -> Polytope:
+    def _project_support(self, dims: list[int], max_rounds: int = 100_000) -> Polytope:
+        """Projection by support LPs (see :meth:`project`); SolverError after
+        ``max_rounds`` rounds of new points."""
         n, d = self.dim, len(dims)
         R = self._rows()
         # LP accuracy (scaled coordinates) plus the rounding of coordinates of size |c0|
@@ -1339,7 +1343,7 @@ class Polytope(SetBase):
             verts = Ye
         else:
             confirmed: dict[tuple, float] = {}
-            for _ in range(100_000):
+            for _ in range(max_rounds):
                 Z = (Y - origin) @ U
                 normals, vidx = _hull._qhull(Z)
                 offs = (Z @ normals.T).max(axis=0)
@@ -1357,7 +1361,7 @@ class Polytope(SetBase):
                 if not new.any():
                     break
                 Y = np.vstack([Y, Ynew[new]])
-            else:  # pragma: no cover
+            else:
                 raise SolverError("projection by support LPs did not converge")
             final = np.array([max(confirmed.get(k, o), o) for k, o in zip(keys, offs,
                                                                            strict=True)])

@@ -159,3 +159,27 @@ def test_well_conditioned_sets_still_proved(n: int) -> None:
     cert = cm.certify_invariant(_model(n, 1.0, -1.0), S, K, eps=0.5, progress=False)
     assert cert.proved is True
     assert "proven" in cert.details["domain"]
+
+
+def test_translated_three_dimensional_sliver_is_not_proved() -> None:
+    # nearly parallel rows, translated far from the origin; the law exceeds U.hi at a vertex
+    V = np.array([[0.9009273926518706, -0.7116807745607325, 1.8972988942744877],
+                  [0.9009270163147747, -0.7116809279078345, 1.8972995496796754],
+                  [0.9009273936437444, -0.7116807840095503, 1.89729889934475]])
+    c = np.array([76.28662643855644, -340.5365670018157, 576.8574068568087])
+    S = cm.Polytope(np.vstack([V, -V]), np.concatenate([V @ c + 1, -(V @ c - 1)]))
+    lo = [Fraction(float(v)) - 1 for v in V @ c]
+    hi = [Fraction(float(v)) + 1 for v in V @ c]
+    M = [[Fraction(float(a)) for a in row] for row in V]
+    verts = [_solve(M, [h if s else low for s, low, h in zip(bits, lo, hi, strict=True)])
+             for bits in itertools.product((0, 1), repeat=3)]
+    top = max(v[0] for v in verts)
+    U_hi = 37610034.41448195
+    assert top > Fraction(U_hi)
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    model = cm.Model(x=x, u=u, f=0.5 * x + 0.5 * c, X=cm.Box([-1e12] * 3, [1e12] * 3),
+                     U=cm.Box([-1e9], [U_hi]))
+    cert = cm.certify_invariant(model, S, np.array([[1.0, 0.0, 0.0]]), eps=1e7,
+                                max_boxes=3000, time_limit=10, progress=False)
+    _check(cert, S, Fraction(U_hi))

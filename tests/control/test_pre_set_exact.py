@@ -352,3 +352,29 @@ def test_exact_simplex_agrees_with_highs(seed):
         assert all(v >= 0 for v in y)
         assert all(sum(int(M[i, j]) * y[j] for j in range(k)) == r[i] for i in range(p))
         assert ref.status == 0 and abs(float(val) - ref.fun) <= 1e-9 * (1 + abs(ref.fun))
+
+
+def test_pre_set_uses_the_exact_model_not_a_folded_one() -> None:
+    """A closed loop whose gain CasADi would fold (exactly -7.65, folded 0.5) is refused, and
+    an open-loop constant term that rounds to 0 (exactly 0.555) empties the pre-set."""
+    import casadi as ca
+
+    from casadi_cmpc.exceptions import ModelError
+
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] * (0.5 + 1e17 * (ca.exp(u + 0.1) - float(np.exp(0.1)))), 0.5 * x[1])
+    m = cm.Model(x=x, u=u, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]))
+    cl = m.closed_loop(np.zeros((1, 2)))
+    A = cl.linear_enclosures()[0]
+    assert A[0, 0, 0] <= -7.6495 <= A[0, 0, 1]  # the exact gain, not the folded 0.5
+    with pytest.raises(ModelError, match="not known exactly"):
+        cm.pre_set(cl, cm.Polytope.from_box(cm.Box([-1, -1], [1, 1])))
+    y = ca.SX.sym("y")
+    v = ca.SX.sym("v")
+    mo = cm.Model(x=y, u=v, f=0.1 * (y + 1e17) - 1e16 + v, X=cm.Box([-1], [1]),
+                  U=cm.Box([-0.5], [0.5]))
+    c = mo.linear_enclosures()[3]
+    exact_c = Fraction(0.1) * Fraction(10**17) - Fraction(10**16)
+    assert Fraction(c[0, 0]) <= exact_c <= Fraction(c[0, 1])
+    assert cm.pre_set(mo, cm.Polytope.from_box(cm.Box([-0.1], [0.1]))).is_empty()
