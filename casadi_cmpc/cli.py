@@ -78,6 +78,27 @@ def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     return base / f"{ex.name}-{h.hexdigest()[:16]}.npz"
 
 
+# statuses of a sequence that answers its settings completely (cached and reused)
+_COMPLETE = ("converged", "max_steps", "until")
+
+
+def _cache_mismatch(seq: Any, ex: Any, cfg: dict) -> str | None:
+    """Why a cached sequence does not answer this run (None when it does)."""
+    from .control.invariance import model_key
+
+    info = seq.info
+    if seq.status not in _COMPLETE:
+        return f"its computation stopped early: status '{seq.status}'"
+    if info.get("model_key") != model_key(ex.model):
+        return "it was computed for another model"
+    if float(info.get("eps", -1.0)) != float(cfg["eps"]) or \
+            bool(info.get("robust")) != bool(cfg["robust"]):
+        return "it was computed with other settings"
+    if info.get("terminal_certificate") != "proved":
+        return "its terminal set is not proven invariant"
+    return None
+
+
 def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> Any:
     from .control.controllable import controllable_sets
     from .control.linear_sets import SetSequence
@@ -89,7 +110,13 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> A
     if path.is_file():
         try:
             seq = SetSequence.load(path)
-            print(f"sequence loaded from the cache {path}")
+            why = _cache_mismatch(seq, ex, cfg)
+            if why:
+                print(f"cache {path} does not answer this run ({why}); computing the "
+                      "sequence again")
+                seq = None
+            else:
+                print(f"sequence loaded from the cache {path}")
         except (ValueError, TypeError, KeyError, OSError) as exc:
             print(f"cache {path} unreadable ({exc}); computing the sequence again")
             seq = None
@@ -97,12 +124,17 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> A
         t0 = time.perf_counter()
         seq = controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=cfg["robust"],
                                 law=ex.local_law, progress=progress)
-        print(f"sequence computed in {time.perf_counter() - t0:.1f} s")
-        try:
-            seq.save(path)
-            print(f"  cached in {path}")
-        except OSError as exc:
-            print(f"  not cached ({exc})")
+        if seq.status == "interrupted":  # a partial sequence is neither used nor cached
+            raise KeyboardInterrupt
+        print(f"sequence computed in {time.perf_counter() - t0:.1f} s ({seq.status})")
+        if seq.status in _COMPLETE:
+            try:
+                seq.save(path)
+                print(f"  cached in {path}")
+            except OSError as exc:
+                print(f"  not cached ({exc})")
+        else:
+            print(f"  not cached: the computation stopped early ({seq.status})")
     print(f"terminal set: {seq.info.get('terminal_certificate')} invariant under the local "
           f"law; sequence: {seq!r}, {len(seq) - 1} steps, eps = {seq.info.get('eps')}, "
           f"{seq.info.get('semantics')}")
@@ -445,6 +477,15 @@ def main(argv: list[str] | None = None) -> int:
     p_exp.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("list", help="list the example names")
     args = parser.parse_args(argv)
+    try:
+        return _command(parser, args)
+    except KeyboardInterrupt:
+        print("cmpc: interrupted (nothing partial was cached)", file=sys.stderr)
+        return 130
+
+
+def _command(parser: Any, args: Any) -> int:
+    """Run the parsed command."""
     if args.command == "export":
         return _export(args)
     if args.command == "list":
