@@ -26,9 +26,9 @@ __all__ = ["rat_nullspace", "ExactRow", "exact_row", "fm_eliminate", "rat_solve"
 _FMAX = float(np.finfo(float).max)
 
 
-def rat_nullspace(M: list[list[Fraction]], k: int) -> list[list[Fraction]]:
-    """Basis of ``{v in Q^k : M v = 0}`` by exact Gauss–Jordan elimination."""
-    rows = [list(r) for r in M]
+def _gauss_jordan(rows: list[list[Fraction]], k: int) -> list[int]:
+    """Reduce ``rows`` in place to reduced row echelon form on their first ``k`` columns
+    (exact); returns the pivot columns (one per leading row)."""
     pivots: list[int] = []
     r = 0
     for col in range(k):
@@ -46,6 +46,13 @@ def rat_nullspace(M: list[list[Fraction]], k: int) -> list[list[Fraction]]:
         r += 1
         if r == len(rows):
             break
+    return pivots
+
+
+def rat_nullspace(M: list[list[Fraction]], k: int) -> list[list[Fraction]]:
+    """Basis of ``{v in Q^k : M v = 0}`` by exact Gauss–Jordan elimination."""
+    rows = [list(r) for r in M]
+    pivots = _gauss_jordan(rows, k)
     free = [c for c in range(k) if c not in pivots]
     basis = []
     for fc in free:
@@ -133,23 +140,8 @@ def rat_solve(M: list[list[Fraction]], r: list[Fraction]) -> list[Fraction] | No
     elimination, free unknowns set to 0; None when the system is inconsistent."""
     k = len(M[0]) if M else 0
     rows = [list(M[i]) + [r[i]] for i in range(len(M))]
-    pivots: list[int] = []
-    rr = 0
-    for col in range(k):
-        piv = next((i for i in range(rr, len(rows)) if rows[i][col] != 0), None)
-        if piv is None:
-            continue
-        rows[rr], rows[piv] = rows[piv], rows[rr]
-        pv = rows[rr][col]
-        rows[rr] = [x / pv for x in rows[rr]]
-        for i in range(len(rows)):
-            if i != rr and rows[i][col] != 0:
-                f = rows[i][col]
-                rows[i] = [x - f * y for x, y in zip(rows[i], rows[rr], strict=True)]
-        pivots.append(col)
-        rr += 1
-        if rr == len(rows):
-            break
+    pivots = _gauss_jordan(rows, k)
+    rr = len(pivots)
     if any(rows[i][k] != 0 for i in range(rr, len(rows))):
         return None
     y = [Fraction(0)] * k
