@@ -40,6 +40,8 @@ import math
 
 import casadi as ca
 
+from ..exceptions import DimensionError, FreeSymbolError, UnsupportedOperationError
+
 __all__ = ["PRELUDE", "UnsupportedIntervalOp", "interval_function", "unsupported_ops",
            "c_double"]
 
@@ -90,18 +92,14 @@ def c_double(v: float) -> str:
 
 
 def _as_sx(fun: ca.Function) -> ca.Function:
-    if not fun.is_a("SXFunction"):
-        try:
-            fun = fun.expand()
-        except Exception as exc:  # pragma: no cover - depends on CasADi internals
-            raise UnsupportedIntervalOp(
-                f"'{fun.name()}' is not an SX Function and cannot be expanded to one: "
-                f"{exc}") from exc
-    if fun.has_free():
-        raise UnsupportedIntervalOp(
-            f"'{fun.name()}' depends on free symbols: "
-            + ", ".join(str(v) for v in fun.get_free()))
-    return fun
+    """``fun`` checked as for the Python interval compiler (SX or expandable, no free
+    symbols, dense inputs), its refusals raised as :class:`UnsupportedIntervalOp`."""
+    from ..interval.compiler import _as_sx_function
+
+    try:
+        return _as_sx_function(fun)
+    except (UnsupportedOperationError, FreeSymbolError, DimensionError) as exc:
+        raise UnsupportedIntervalOp(str(exc)) from exc
 
 
 def unsupported_ops(fun: ca.Function) -> list[str]:
@@ -134,9 +132,6 @@ def interval_function(fun: ca.Function, name: str) -> str:
         raise UnsupportedIntervalOp(
             f"'{fun.name()}' holds operations without an outward-rounded interval rule in the "
             f"C export: {', '.join(bad)}")
-    for i in range(fun.n_in()):
-        if not fun.sparsity_in(i).is_dense():
-            raise UnsupportedIntervalOp(f"input {i} of '{fun.name()}' is sparse")
     body: list[str] = []
     used: set[int] = set()
     for o in range(fun.n_out()):  # structural zeros of a sparse output
