@@ -228,6 +228,7 @@ def main() -> int:
     ex8 = cm.models.load("cannon")
     kw = dict(ex8.info["mpc"])
     kw["solver"] = "sqp"
+    kw["mode"] = "receding"  # the exported C controller solves at every step
     ctrl8 = cm.ContractiveMPC(ex8.model, **kw)
     info8 = export_c(ctrl8, tmp / "e8", x0=[1.9, -1.5])
     C8 = load(info8.directory)

@@ -295,7 +295,8 @@ class DoMPCController:
 def dompc_child(repeats: int, steps: int) -> None:
     """Entry of the child process: do-mpc, ours and direct interleaved; one JSON line."""
     model = cannon()
-    ours = Loop("ours_ipopt", ContractiveMPC(model, N, ALPHA, solver="ipopt"), model, True)
+    ours = Loop("ours_ipopt", ContractiveMPC(model, N, ALPHA, solver="ipopt", mode="receding"),
+                model, True)
     direct = Loop("direct_ipopt", DirectNLP(model, "ipopt"), model, False)
     import do_mpc  # after our set-up; its import warnings go to the child's stderr
 
@@ -345,7 +346,8 @@ def profile_ctrl(model, steps: int) -> None:
     import pstats
 
     for solver in ("ipopt", "sqp"):
-        lp = Loop(solver, ContractiveMPC(model, N, ALPHA, solver=solver), model, True)
+        lp = Loop(solver, ContractiveMPC(model, N, ALPHA, solver=solver, mode="receding"),
+                  model, True)
         lp.run(steps, keep=False)
         pr = cProfile.Profile()
         pr.enable()
@@ -368,10 +370,12 @@ def main(quick: bool) -> dict:
     loops = {}
     for solver in ("ipopt", "sqp"):
         loops[f"ours_{solver}"] = Loop(
-            f"ours_{solver}", ContractiveMPC(model, N, ALPHA, solver=solver), model, True)
+            f"ours_{solver}", ContractiveMPC(model, N, ALPHA, solver=solver, mode="receding"),
+            model, True)
         loops[f"ours_{solver}_noverify"] = Loop(
             f"ours_{solver}_noverify",
-            ContractiveMPC(model, N, ALPHA, solver=solver, verify=False, search="never"),
+            ContractiveMPC(model, N, ALPHA, solver=solver, verify=False, search="never",
+                           mode="receding"),
             model, True)
         loops[f"direct_{solver}"] = Loop(f"direct_{solver}", DirectNLP(model, solver), model,
                                          False)

@@ -19,6 +19,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import InterruptScope
 from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval.compiler import inclusion
@@ -273,11 +274,16 @@ class OneStepSet(SetResult):
         hit = np.flatnonzero(((I[..., 0] <= x) & (x <= I[..., 1])).all(axis=1))
         return None if hit.size == 0 else self.witness[hit[0]].copy()
 
-    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), **kw: Any) -> Any:
-        """Draw the paving (inner green, boundary yellow) with axis labels ``x1, x2``."""
+    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), model: Any = None,
+             **kw: Any) -> Any:
+        """Draw the paving (inner green, boundary yellow). The axes are labelled with the
+        model's state names and units when ``model`` is given, else ``x1, x2``."""
+        from ..plot import axis_label, variable_labels
+
         ax = self.paving.plot(ax=ax, dims=dims, **kw)
-        ax.set_xlabel(f"x{dims[0] + 1}")
-        ax.set_ylabel(f"x{dims[1] + 1}")
+        names, units = variable_labels(model, "x", d=self.paving.dim)
+        ax.set_xlabel(axis_label(names[dims[0]], units[dims[0]]))
+        ax.set_ylabel(axis_label(names[dims[1]], units[dims[1]]))
         return ax
 
 
@@ -625,7 +631,9 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     model : Model
     T : Polytope
         Terminal set, (robustly) control invariant. It must be proven so: give ``law`` (the
-        local law: a gain ``K`` (m, n), ``u = K x``, or an SX expression of ``model.x``),
+        local law: a :class:`~casadi_cmpc.LinearLaw` ``u = u_eq + K (x - x_eq)`` as
+        :func:`~casadi_cmpc.local_lqr` returns, a bare gain ``K`` (m, n), ``u = K x``, or
+        an SX expression of ``model.x``),
         or ``certificate`` (a proved :class:`~casadi_cmpc.Certificate` of
         :func:`~casadi_cmpc.certify_invariant` about this model, this very T and W, or the
         centre of W when ``robust=False``: checked, with a clear error otherwise), or
@@ -701,10 +709,12 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     target: Any = T
     polys: list[Polytope] = []
     seq.status = "max_steps"
-    bar = tqdm(range(1, max_steps + 1), desc="controllable sets", unit="step",
+    # no total: the sequence usually stops at convergence, long before max_steps
+    bar = tqdm(total=None, desc="controllable sets", unit="step",
                disable=progress is False, delay=0 if progress else 2.0, leave=False)
+    scope = InterruptScope()
     try:
-        for i in bar:
+        for i in range(1, max_steps + 1):
             ts = time.perf_counter()
             r = _search(model, _Target(model, target), frontier, eps, robust=robust,
                         obstacles=obs, u_eps=u_eps, max_cells=max_cells, w_points=w_points,
@@ -734,7 +744,9 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
             step["seconds"] = time.perf_counter() - ts
             seq.steps.append(step)
             seq.sets.append(K)
-            bar.set_postfix(boxes=int(inner.shape[0]), refresh=False)
+            bar.set_postfix_str(f"K_{i}: {int(inner.shape[0])} boxes; stops when no new box "
+                                f"is proven (at most {max_steps} steps)", refresh=False)
+            bar.update(1)
             if r["status"] != Status.PROVED:
                 seq.status = "budget"
                 break
@@ -747,8 +759,10 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                 break
             target = K
     except KeyboardInterrupt:
+        scope.reraise_if_nested()
         seq.status = "interrupted"
     finally:
+        scope.close()
         bar.close()
     seq.info["seconds"] = time.perf_counter() - t0
     return seq

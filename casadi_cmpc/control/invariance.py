@@ -20,6 +20,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import InterruptScope
 from .._validate import float_vector as _vector
 from .._validate import weight_matrix as _weight
 from ..exceptions import DimensionError, ModelError, UnsupportedOperationError
@@ -30,6 +31,7 @@ from ..sets.zonotope import Zonotope, zonotope_inclusion
 from ..solvers._common import positive_eps
 from ..solvers.engine import Status
 from ..solvers.result import Certificate, Result
+from .law import LinearLaw, law_expr
 
 __all__ = ["certify_invariant", "local_lqr", "largest_invariant_zonotope",
            "InvariantZonotopeResult"]
@@ -37,7 +39,7 @@ __all__ = ["certify_invariant", "local_lqr", "largest_invariant_zonotope",
 
 def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
               w: Any = None) -> np.ndarray:
-    """LQR gain ``K`` (u = u_eq + K (x - x_eq)) of the linearisation at an equilibrium.
+    """The LQR law ``u = u_eq + K (x - x_eq)`` of the linearisation at an equilibrium.
 
     Parameters
     ----------
@@ -54,9 +56,12 @@ def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
 
     Returns
     -------
-    ndarray, shape (m, n)
-        ``K`` with the sign convention of this library (``u = K x``): python-control's
-        ``dlqr`` returns ``-K``.
+    LinearLaw
+        The law ``u = u_eq + K (x - x_eq)``, carrying ``K`` (m, n) and the equilibrium, so
+        that every function it is passed to (``certify_invariant``, ``controllable_sets``,
+        ``ContractiveMPC``, ``SetSequenceMPC``, ``simulate``) applies the same law.
+        ``np.asarray(law)`` (or ``law.K``) is the gain alone, with the sign convention of
+        this library (python-control's ``dlqr`` returns ``-K``).
 
     Raises
     ------
@@ -83,18 +88,10 @@ def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
     except Exception as exc:  # python-control raises several types for this
         raise ValueError(f"no LQR gain for the linearisation of '{model.name}' at "
                          f"x_eq = {xe.tolist()}: {exc}") from exc
-    return -np.asarray(K, dtype=float).reshape(m, n)
+    return LinearLaw(-np.asarray(K, dtype=float).reshape(m, n), xe, ue)
 
 
-def _law_expr(model: Model, law: Any) -> ca.SX:
-    if isinstance(law, ca.SX):
-        if law.numel() != model.m:
-            raise DimensionError(f"the law must have {model.m} elements")
-        return ca.reshape(law, model.m, 1)
-    K = np.atleast_2d(np.asarray(law, dtype=float))
-    if K.shape != (model.m, model.n):
-        raise DimensionError(f"the gain must have shape ({model.m}, {model.n}); got {K.shape}")
-    return ca.mtimes(ca.DM(K), model.x)
+_law_expr = law_expr
 
 
 def _check_target(S: Any, n: int) -> None:
@@ -308,8 +305,10 @@ def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = No
         support of the enclosure of ``f(piece)`` must not exceed a *lower* bound of the
         support of S in each facet normal (never ``S.to_polytope()``, whose outward-rounded
         offsets describe a slightly larger set, nor a bounding box).
-    law : array_like (m, n) or casadi.SX (m, 1)
-        Gain ``K`` (``u = K x``) or an expression of ``model.x``.
+    law : LinearLaw, array_like (m, n) or casadi.SX (m, 1)
+        The local law: a :class:`LinearLaw` ``u = u_eq + K (x - x_eq)`` (what
+        :func:`local_lqr` returns), a bare gain ``K`` (``u = K x``) or an expression of
+        ``model.x``.
     eps : float
         Pieces whose largest generator entry is at most ``eps`` are not split further.
     W : Box, optional
@@ -533,14 +532,36 @@ def _certify_core(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W
         details["undecided_pieces"] = int(boxes.shape[0])
         details["undecided_boxes"] = boxes
         budget = any(p.status.name == "BUDGET" for p in runs.values())
-        return Certificate(
-            "undecided", None, claim,
-            f"{boxes.shape[0]} pieces of S left undecided at eps = {eps}"
-            + (" (budget reached)" if budget else "") + "; no counterexample found", details)
+        return Certificate("undecided", None, claim,
+                           _undecided_reason(still, eps, budget, model), details)
     return Certificate("proved", True, claim,
                        "set inversion over sub-zonotopes of S (Alg 4.3): every piece meeting "
                        "S has its successor inside S and its input inside U, with outward "
                        "rounding", details)
+
+
+def _undecided_reason(still: list, eps: float, budget: bool, model: Model) -> str:
+    """Which condition is undecided where, and what to try."""
+    parts, total = [], 0
+    for name, fr, mask in still:
+        bb = fr.bounding_boxes()[mask]
+        total += bb.shape[0]
+        lo, hi = bb[:, :, 0].min(axis=0), bb[:, :, 1].max(axis=0)
+        what = ("law(x) in U" if name == "input bound" else
+                "f(x, law(x), w) in S for all w in W" if model.l else "f(x, law(x)) in S")
+        parts.append(f"{what} undecided on {bb.shape[0]} pieces within "
+                     f"[{np.round(lo, 6).tolist()}, {np.round(hi, 6).tolist()}]")
+    tries = [f"a smaller eps (e.g. {eps / 4:g})"]
+    if budget:
+        tries.insert(0, "a larger max_boxes or time_limit (the budget was reached)")
+    if any(name != "input bound" for name, _, _ in still):
+        tries.append("a smaller S, or one shaped by a Lyapunov level set of the closed loop "
+                     "(the successors of these pieces reach S's boundary)")
+    if any(name == "input bound" for name, _, _ in still):
+        tries.append("a smaller S or a gentler gain (law(x) reaches U's bounds there)")
+    return (f"{total} pieces of S left undecided at eps = {eps}"
+            + (" (budget reached)" if budget else "") + ": " + "; ".join(parts)
+            + "; no counterexample found. Try " + ", or ".join(tries))
 
 
 # ------------------------------------------------------------------- Alg 4.4
@@ -616,8 +637,10 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
     Parameters
     ----------
     model : Model
-    law : array_like (m_u, n) or casadi.SX (m_u, 1)
-        Gain ``K`` (``u = K x``) or an expression of ``model.x``.
+    law : LinearLaw, array_like (m, n) or casadi.SX (m, 1)
+        The local law: a :class:`LinearLaw` ``u = u_eq + K (x - x_eq)`` (what
+        :func:`local_lqr` returns), a bare gain ``K`` (``u = K x``) or an expression of
+        ``model.x``.
     M0 : array_like, shape (n, m, 2)
         The initial interval generator matrix, entry ``(i, j)`` as ``[lo, hi]``.
     eps_opt : float
@@ -710,6 +733,7 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
     status, message = Status.PROVED, "search completed"
     bar = tqdm(total=None, desc="invariant zonotope", unit="family",
                disable=progress is False, delay=0 if progress else 2.0, leave=False)
+    scope = InterruptScope()
     try:
         while heap:
             if best is not None and -heap[0][0] <= best[1]:
@@ -760,8 +784,10 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
             push(L)
             push(R)
     except KeyboardInterrupt:
+        scope.reraise_if_nested()
         status, message = Status.BUDGET, "interrupted"
     finally:
+        scope.close()
         bar.close()
     st["queued"] = len(heap)
     st["seconds"] = time.perf_counter() - t0

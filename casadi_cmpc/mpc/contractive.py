@@ -24,6 +24,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import solver_call
 from .._validate import float_vector as _vector
 from .._validate import weight_matrix as _weight
 from ..exceptions import DimensionError, ModelError
@@ -498,17 +499,26 @@ class ContractiveMPC:
     contract : array_like (q, n), optional
         The matrix ``C`` of the contraction (default: the identity); e.g. select the
         position components whose distance to the target must contract.
-    local_law : array_like (m, n) or casadi.SX, optional
-        Dual mode: a gain ``K`` (``u = u_ref + K (x - x_ref)``) or an expression of the
-        model's ``x``, applied inside ``local_set``.
+    local_law : LinearLaw, array_like (m, n) or casadi.SX, optional
+        Dual mode: a :class:`~casadi_cmpc.LinearLaw` ``u = u_eq + K (x - x_eq)`` (what
+        :func:`~casadi_cmpc.local_lqr` returns), or an expression of the model's ``x``,
+        applied inside ``local_set``. A bare gain ``K`` means ``u = K x`` (as everywhere in
+        the library) and is refused when ``x_ref`` or ``u_ref`` is not zero.
     local_set : Polytope, PolytopeUnion or Box, optional
         Where ``local_law`` is applied (default: ``terminal``).
     solver : {"ipopt", "sqp", "lp"}
         IPOPT (default), CasADi ``sqpmethod`` with ``qrqp``, or (linear models, ``norm`` 1
         or inf, or a Polytope gauge given as ``norm``) the LP form (3.5)-(3.6) by HiGHS.
-    mode : {"receding", "sequence"}
-        ``"receding"``: solve at every call and apply the first move. ``"sequence"``:
-        apply the whole verified sequence before solving again (the thesis' scheme).
+    mode : {"sequence", "receding"}
+        ``"sequence"`` (default, the scheme of thesis §2.4.1 whose closed loop carries a
+        guarantee): apply the whole verified sequence before solving again. Each verified
+        plan brings ``||C (x - x_ref)||`` down by the factor ``alpha`` after its N moves
+        inside X with U respected (for ``w = w_nominal``), so the distance at the solve
+        instants decays at least like ``alpha^j``. ``"receding"``: solve at every call and
+        apply the first move only. Then "verified" promises that the plan computed at this
+        step is feasible and contracting (constraint (2.8) holds for it); the next plan
+        need not continue it, so neither the decrease of the distance nor recursive
+        feasibility is guaranteed for the closed loop (see :attr:`guarantee`).
     horizon_min, horizon_max : int
         Range of the horizon search (``horizon=None``).
     verify : bool
@@ -559,7 +569,7 @@ class ContractiveMPC:
                  x_ref: Any = None, u_ref: Any = None, w_nominal: Any = None,
                  constraints: Any = None, terminal: Polytope | None = None,
                  contract: Any = None, local_law: Any = None, local_set: Any = None,
-                 solver: str = "ipopt", mode: str = "receding", horizon_min: int = 1,
+                 solver: str = "ipopt", mode: str = "sequence", horizon_min: int = 1,
                  horizon_max: int = 10, verify: bool = True, search: str = "auto",
                  search_eps: float | None = None, search_max_boxes: int = 20000,
                  search_time_limit: float = 5.0, certify_optimal: bool = False,
@@ -724,17 +734,20 @@ class ContractiveMPC:
         return path, term
 
     def _law_function(self, law: Any) -> ca.Function:
+        """The local law as a Function ``x -> u`` (one convention: see
+        :mod:`casadi_cmpc.control.law`). A bare gain is ``u = K x`` everywhere; at a
+        reference other than the origin it is ambiguous and refused."""
+        from ..control.law import LinearLaw, as_law, law_expr
+
         model = self.model
-        if isinstance(law, ca.SX):
-            if law.numel() != model.m:
-                raise DimensionError(f"local_law must have {model.m} elements")
-            return ca.Function("local_law", [model.x], [ca.reshape(law, model.m, 1)])
-        K = np.atleast_2d(np.asarray(law, dtype=float))
-        if K.shape != (model.m, model.n):
-            raise DimensionError(f"the local gain must have shape ({model.m}, {model.n}); "
-                                 f"got {K.shape}")
-        expr = ca.DM(self.u_ref) + ca.mtimes(ca.DM(K), model.x - ca.DM(self.x_ref))
-        return ca.Function("local_law", [model.x], [expr])
+        lw = as_law(law, model.m, model.n)
+        if (isinstance(lw, LinearLaw) and not isinstance(law, LinearLaw)
+                and (np.any(self.x_ref) or np.any(self.u_ref))):
+            raise ValueError(
+                "local_law is a bare gain K and the reference is not the origin: a bare gain "
+                "means u = K x everywhere in casadi_cmpc; give cm.LinearLaw(K, x_eq=x_ref, "
+                "u_eq=u_ref) for u = u_ref + K (x - x_ref) (cm.local_lqr returns one)")
+        return ca.Function("local_law", [model.x], [law_expr(model, lw)])
 
     def _setup_lp(self) -> None:
         if not self.model.is_linear:
@@ -889,11 +902,9 @@ class ContractiveMPC:
         s = 1.0 / r0
         lam = self._lam.get(N) if start is None else None
         t = time.perf_counter()
-        if lam is not None:
-            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), lam_x0=lam[0], lam_g0=lam[1],
-                           **h.bounds)
-        else:
-            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), **h.bounds)
+        warm = {"lam_x0": lam[0], "lam_g0": lam[1]} if lam is not None else {}
+        with solver_call():
+            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), **warm, **h.bounds)
         dt = time.perf_counter() - t
         stats = {"solver": self.solver, "solve_time": dt, "_fun": h.solver}
         z = np.asarray(sol["x"], dtype=float).ravel()
@@ -1003,9 +1014,10 @@ class ContractiveMPC:
         return self._unverified(x, N, u, stats, details, proofs, t0)
 
     def _search_horizon(self, x: np.ndarray, r0: float, t0: float) -> MPCResult:
-        """Alg 4.5: the horizons ``horizon_min..horizon_max`` in turn; a horizon is left
-        only when it is proven infeasible (or without proofs: ``search="never"`` or
-        ``verify=False``).
+        """Alg 4.5: the horizons ``horizon_min..horizon_max`` in turn, until one is
+        verified. A horizon proven infeasible is left as in Alg 4.5; one whose search did
+        not decide is left too (it proves nothing), and "infeasible" is claimed only when
+        every horizon tried was proven infeasible.
 
         What is computed at one horizon (local sequence, solver statistics, check details)
         is used only at that horizon: the result reports the horizon its sequence belongs
@@ -1031,9 +1043,9 @@ class ContractiveMPC:
             if found is not None:
                 return self._verified(x, N, found, stats, proof.get("details", {}), t0,
                                       proofs)
-            if proof["result"] != "infeasible":
-                return self._unverified(x, N, u, stats, details, proofs, t0)
-        if self.search == "never" or not self.verify:
+            # an undecided horizon proves nothing: the search goes on to the next one
+        if (self.search == "never" or not self.verify
+                or any(p.get("result") != "infeasible" for p in proofs)):
             return self._unverified(x, tried[-1], u, stats, details, proofs, t0)
         return self._infeasible(x, tried, u, stats, proofs, t0)
 
@@ -1224,12 +1236,18 @@ class ContractiveMPC:
         seq = self._fallback(x, N, u)
         cost, xp = self._predict(N, seq, x)
         budget = any(p.get("budget") for p in proofs)
-        undecided = bool(proofs) and proofs[-1].get("result") == "undecided"
+        open_ = [p for p in proofs if p.get("result") != "infeasible"]
+        undecided = bool(open_)
         label = "undecided" if undecided else "unverified"
         reason = details.get("failed", "")
         if undecided:
-            reason = (f"horizon {N}: the local solver gave no verified sequence and the "
-                      f"search over U^{N} did not decide ({proofs[-1]['how']})")
+            hs = [int(p["horizon"]) for p in open_ if "horizon" in p]
+            inf = [int(p["horizon"]) for p in proofs
+                   if p.get("result") == "infeasible" and "horizon" in p]
+            reason = (f"no verified sequence at horizon(s) {hs or [N]}: the local solver gave "
+                      f"none and the search over U^N did not decide ({open_[-1]['how']})"
+                      + (f"; horizon(s) {inf} proven infeasible" if inf else "")
+                      + f"; the sequence applied is horizon {N}'s (not verified)")
         details = dict(details)
         if proofs:
             details["proofs"] = proofs
@@ -1271,6 +1289,26 @@ class ContractiveMPC:
         from ..codegen import export_c
 
         return export_c(self, directory, solver=solver, **kw)
+
+    @property
+    def guarantee(self) -> str:
+        """What the closed loop under this controller is guaranteed (one sentence)."""
+        w = (f" for w = {np.asarray(self.w_nominal).tolist()} (the nominal disturbance) only"
+             if self.model.l else "")
+        law = ""
+        if self._law is not None:
+            law = ("; inside the local set the local law is applied (its invariance is not "
+                   "checked by this controller: certify it with cm.certify_invariant)")
+        dist = f"the {self._norm_name()}"
+        if self.mode == "sequence":
+            return (f"each verified plan is applied in full: {dist} shrinks by the factor "
+                    f"alpha = {self.alpha} over each plan, with X and U respected along it"
+                    f"{w}; a step labelled other than verified carries no such promise"
+                    + law)
+        return (f"receding mode: each step labelled verified has a plan that is feasible "
+                f"and contracts {dist} by alpha = {self.alpha}{w}; only its first move is "
+                "applied, so the decrease of the distance along the closed loop is NOT "
+                "guaranteed (mode='sequence' guarantees it)" + law)
 
     def __repr__(self) -> str:
         hz = self.horizon if self.horizon is not None else \

@@ -21,6 +21,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import solver_call
 from .._validate import float_vector, weight_matrix
 from ..exceptions import CmpcWarning, DimensionError, ModelError
 from ..interval.modal import SemanticExtension
@@ -116,13 +117,14 @@ class SetSequenceMPC:
         Weight of the successor state (default identity).
     R : array_like (m, m), optional
         Weight of the control (default identity).
-    local_law : array_like (m, n) or casadi.SX, optional
-        The law applied inside ``T = seq[0]``; a gain ``K`` (``u = K x``) or an expression
-        of ``model.x``. Default: the law T was proven invariant under (stored with the
-        sequence by :func:`casadi_cmpc.controllable_sets`). A law other than that one is
-        refused (ValueError): T's invariance was proven for its law only. With a sequence
-        that holds no proven law (``assume_invariant=True``) the given law is applied and
-        its answers say "not proven".
+    local_law : LinearLaw, array_like (m, n) or casadi.SX, optional
+        The law applied inside ``T = seq[0]``: a :class:`~casadi_cmpc.LinearLaw`
+        ``u = u_eq + K (x - x_eq)`` (as :func:`~casadi_cmpc.local_lqr` returns), a bare gain
+        ``K`` (``u = K x``) or an expression of ``model.x``. Default: the law T was proven
+        invariant under (stored with the sequence by :func:`casadi_cmpc.controllable_sets`).
+        A law other than that one is refused (ValueError): T's invariance was proven for its
+        law only. With a sequence that holds no proven law (``assume_invariant=True``) the
+        given law is applied and its answers say "not proven".
     solver : {"ipopt", "sqp"}
         Local solver of the one-step problem (built once, the state as parameter).
     robust : bool, optional
@@ -468,6 +470,23 @@ class SetSequenceMPC:
         """Forget the previous call (the controller keeps no state between calls)."""
         self.last_info = {}
 
+    @property
+    def guarantee(self) -> str:
+        """What the closed loop under this controller is guaranteed (one sentence).
+
+        From ``x`` in ``K_i`` (``i >= 1``) each applied control is certified (interval
+        arithmetic) to bring the next state into ``K_{i-1}``; in ``T = K_0`` the local law
+        keeps it in T when T's invariance under that law is proven. Together: T is reached
+        in at most ``i`` steps and never left, for the disturbances named."""
+        w = self._w_claim() or " (no disturbance)"
+        law = ("the local law keeps it in T (T proven invariant under that law)"
+               if self._law_proved else
+               "inside T the local law is applied, but T's invariance under it is NOT "
+               "proven, so staying in T is not guaranteed")
+        return (f"from x in K_i every applied control is certified to bring the state into "
+                f"K_(i-1), so T = K_0 is reached in at most i steps{w}; {law}. A step that "
+                "is not certified (e.g. x outside every K_i) says so in its label")
+
     def _w_claim(self) -> str:
         """Which disturbances a claim of this controller covers."""
         if not self.model.l:
@@ -653,8 +672,9 @@ class SetSequenceMPC:
         try:
             z0, lam0, cs = self._initial(x, self.model.U.mid if u0 is None else u0)
             p = np.concatenate([x, H.ravel(order="F"), h, [cs]])
-            sol = self._nlp(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=-np.inf, ubg=0.0,
-                            lam_g0=lam0)
+            with solver_call():
+                sol = self._nlp(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=-np.inf, ubg=0.0,
+                                lam_g0=lam0)
         except RuntimeError as exc:
             stats["return_status"] = str(exc)
             return None
@@ -678,7 +698,8 @@ class SetSequenceMPC:
             xp[1] = self._xnext
         self._xnext = None
         self.last_info = {"status": "ok" if status == Status.PROVED else status.name.lower(),
-                          "certificate": cert.label, "horizon": lvl, "mode": mode,
+                          "certificate": cert.label, "horizon": lvl, "level": lvl,
+                          "mode": mode,
                           "solve_time": el, "minimax": self.minimax}
         return MPCResult(status=status, message=cert.reason, method="set sequence one-step",
                          nit=0, n_boxes=0, elapsed=el, x=x, u=u, u_seq=u[None],

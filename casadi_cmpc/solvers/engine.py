@@ -30,6 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
 
@@ -43,13 +44,26 @@ DROPPED = np.int8(2)  # finished without a record (grouped frontiers, see PairFr
 
 
 class Status(enum.IntEnum):
-    """Outcome codes shared by the solvers (``success == (status == PROVED)``)."""
+    """Outcome codes shared by the solvers (``success == (status == PROVED)``).
+
+    An :class:`~enum.IntEnum`: a member equals its code (``Status.PROVED == 0``), while
+    ``str()`` and formatting give its name, so that printed results read as words.
+
+    Examples
+    --------
+    >>> from casadi_cmpc.solvers.engine import Status
+    >>> str(Status.PROVED), f"{Status.BUDGET}", int(Status.DISPROVED), Status(3)
+    ('PROVED', 'BUDGET', 2, <Status.UNDECIDED: 3>)
+    """
 
     PROVED = 0
     BUDGET = 1  # a limit (max_boxes, time_limit) or an interruption stopped the search
     DISPROVED = 2
     UNDECIDED = 3
     NUMERICAL = 4
+
+    def __str__(self) -> str:
+        return self.name
 
 
 class Frontier(Protocol):
@@ -308,6 +322,7 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     bar = tqdm(total=None, desc=desc, unit="box", disable=progress is False,
                delay=0 if progress else 2.0, leave=False)
     n_classified = 0
+    scope = InterruptScope()
     try:
         while len(frontier):
             if n_classified + len(frontier) > max_boxes:
@@ -361,8 +376,10 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 bar.update(n)
                 bar.set_postfix(level=level - 1, frontier=len(frontier), refresh=False)
     except KeyboardInterrupt:
+        scope.reraise_if_nested()  # inside a larger computation: it answers Ctrl-C
         status, message = Status.BUDGET, "interrupted"
     finally:
+        scope.close()
         bar.close()
     level = len(done)
     inner = [d[0] for d in done if d[0] is not None]

@@ -16,6 +16,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import solver_call
 from ..exceptions import DimensionError
 from ..interval.compiler import InclusionFunction
 from ._common import (
@@ -228,7 +229,8 @@ class _Search:
     def _run_nlp(self, args: dict[str, Any]) -> dict[str, Any] | None:
         self.n_local += 1
         try:
-            return self._nlp(**args)
+            with solver_call():
+                return self._nlp(**args)
         except RuntimeError:  # an evaluation error: the local solver is only a heuristic
             return None
 

@@ -85,18 +85,19 @@ def test_lqr_makes_a_small_box_invariant_on_a_3_state_model_with_nonzero_equilib
     A = np.asarray(model.jacobian_function("x")(xe, ue, np.zeros(0)))
     B = np.asarray(model.jacobian_function("u")(xe, ue, np.zeros(0)))
     assert np.abs(np.linalg.eigvals(A + B @ K)).max() < 1  # stabilising, u = K x sign
-    law = ca.DM(ue) + ca.mtimes(ca.DM(K), model.x - ca.DM(xe))
+    assert isinstance(K, cm.LinearLaw) and np.array_equal(K.x_eq, xe)
+    law = ca.DM(ue) + ca.mtimes(ca.DM(K.K), model.x - ca.DM(xe))  # the same law as K
     r = 0.05
     S = cm.Polytope.from_box(cm.Box(xe - r, xe + r))
     c = cm.certify_invariant(model, S, law, eps=0.01)
     if c.proved is True:
         rng = np.random.default_rng(2)
         pts = _sample_in(S, 2000, rng)
-        us = ue + (pts - xe) @ K.T
+        us = ue + (pts - xe) @ K.K.T
         assert S.contains(model.step(pts, us)).all()
     elif c.proved is False:  # a box need not be invariant: the counterexample must be real
         xc = c.counterexample
-        uc = ue + (xc - xe) @ K.T
+        uc = ue + (xc - xe) @ K.K.T
         assert S.contains(xc[None, :])[0]
         assert not S.contains(model.step(xc, uc)[None, :])[0] or np.abs(uc).max() > 2
 
@@ -331,7 +332,7 @@ def test_largest_invariant_zonotope_on_a_3_state_model():
     assert Z.dim == 3 and Z.n_generators == 5 and res.volume > 0
     rng = np.random.default_rng(7)
     P = _zono_samples(Z, 500, rng)
-    us = P @ K.T
+    us = P @ K.K.T
     assert (np.abs(us) <= 2).all()
     assert (_zono_norm(Z, model.step(P, us)) <= 1.0).all()
     # a budget stops the search early; what it returns is still proven

@@ -64,7 +64,7 @@ def test_cost_matches_formula(cannon):
 
 
 def test_first_move_and_warm_start(cannon):
-    ctrl = ContractiveMPC(cannon, horizon=5, alpha=0.9, solver="sqp")
+    ctrl = ContractiveMPC(cannon, horizon=5, alpha=0.9, solver="sqp", mode="receding")
     x = np.array([1.5, -1.0])
     us = []
     for _ in range(40):
@@ -75,6 +75,26 @@ def test_first_move_and_warm_start(cannon):
         us.append(u)
         x = cannon.step(x, u)
     assert np.abs(x).max() < 0.15
+
+
+def test_default_mode_carries_the_closed_loop_guarantee(cannon):
+    """The default (sequence) mode: at the j-th solve instant the contracted distance is at
+    most alpha^j times the first one, as its guarantee says; receding mode says that it
+    promises the plan only."""
+    ctrl = ContractiveMPC(cannon, horizon=4, alpha=0.8)
+    assert ctrl.mode == "sequence" and "shrinks by the factor" in ctrl.guarantee
+    x = np.array([1.2, -0.8])
+    d0, solves = float(np.linalg.norm(x)), 0
+    for _ in range(24):
+        u = ctrl(x)
+        if ctrl.last_info["mode"] == "mpc":
+            assert ctrl.last_info["certificate"] == "verified"
+            assert np.linalg.norm(x) <= 0.8 ** solves * d0 * (1 + 1e-9)
+            solves += 1
+        x = cannon.step(x, u)
+    assert solves == 6  # one solve per plan of 4 moves
+    rec = ContractiveMPC(cannon, horizon=4, alpha=0.8, mode="receding")
+    assert "NOT guaranteed" in rec.guarantee and "plan" in rec.guarantee
 
 
 def test_sequence_mode_applies_whole_sequence(cannon):

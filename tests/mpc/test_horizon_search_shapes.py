@@ -168,3 +168,57 @@ def test_search_never_with_a_failing_last_horizon_falls_back_at_that_horizon():
     assert r.status == cm.Status.NUMERICAL  # no sequence at horizon 3 and no search
     _assert_consistent(model, ctrl, r)
     np.testing.assert_array_equal(r.u_seq, np.zeros((3, 2)))  # u_ref at horizon 3
+
+
+def _double_integrator() -> cm.Model:
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    return cm.Model(x=x, u=u, f=ca.vertcat(x[0] + x[1], x[1] + u),
+                    X=cm.Box([-2, -2], [2, 2]), U=cm.Box([-0.5], [0.5]))
+
+
+def _undecided(self, x, r0, N, stats):  # a search that never decides (its budget is out)
+    return None, {"horizon": N, "result": "undecided", "how": "budget reached",
+                  "boxes": 1, "budget": True}
+
+
+def test_an_undecided_horizon_does_not_stop_the_search(monkeypatch):
+    """From x = (1, 0) with alpha = 0.4 horizons 1 and 2 are infeasible and horizon 3
+    feasible: when the searches at 1 and 2 do not decide, the search goes on and verifies
+    horizon 3."""
+    model = _double_integrator()
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.4, norm="inf", horizon_min=1,
+                          horizon_max=4)
+    real = ctrl.solve([1.0, 0.0])  # with the real searches: 1 and 2 proven infeasible
+    assert real.horizon == 3 and real.certificate.label == "verified"
+    assert [p["result"] for p in real.certificate.details["proofs"]] == ["infeasible"] * 2
+    monkeypatch.setattr(ContractiveMPC, "_prove", _undecided)
+    ctrl.reset()
+    r = ctrl.solve([1.0, 0.0])
+    assert r.horizon == 3 and r.certificate.label == "verified"
+    assert r.stats["horizons_tried"] == [1, 2, 3]
+    xN = r.x_pred[-1]
+    assert np.abs(xN).max() <= 0.4 * 1.0 + 1e-9
+
+
+def test_infeasible_is_claimed_only_when_every_horizon_is_proven(monkeypatch):
+    model = _double_integrator()
+    ctrl = ContractiveMPC(model, horizon=None, alpha=0.4, norm="inf", horizon_min=1,
+                          horizon_max=2)
+    assert ctrl.solve([1.0, 0.0]).certificate.label == "proved_infeasible"
+    real = ContractiveMPC._prove
+
+    def second_undecided(self, x, r0, N, stats):
+        return _undecided(self, x, r0, N, stats) if N == 2 else real(self, x, r0, N, stats)
+
+    monkeypatch.setattr(ContractiveMPC, "_prove", second_undecided)
+    ctrl.reset()
+    r = ctrl.solve([1.0, 0.0])
+    assert r.certificate.label == "undecided" and r.certificate.proved is None
+    assert r.horizon == 2 and r.u_seq.shape == (2, 1)
+    assert "[1] proven infeasible" in r.certificate.reason
+    monkeypatch.setattr(ContractiveMPC, "_prove", _undecided)
+    ctrl.reset()
+    r = ctrl.solve([1.0, 0.0])
+    assert r.certificate.label == "undecided"
+    assert r.stats["horizons_tried"] == [1, 2]
