@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import casadi as ca
@@ -99,6 +99,59 @@ def _as_model_box(B: Any, d: int, name: str) -> Box:
     return box
 
 
+def _as_names(names: Any, d: int, what: str, prefix: str) -> tuple[str, ...]:
+    """Names of the d components of a variable: given ones checked, or ``prefix1..prefixd``."""
+    if names is None:
+        return tuple(f"{prefix}{i + 1}" for i in range(d))
+    if isinstance(names, str):
+        names = [names]
+    try:
+        names = list(names)
+    except TypeError:
+        raise TypeError(f"{what} must be a sequence of {d} strings; got "
+                        f"{type(names).__name__}") from None
+    if len(names) != d:
+        raise DimensionError(f"{what} has the wrong number of names; expected {d} (one per "
+                             f"component) instead of {len(names)}: {names}")
+    for v in names:
+        if not isinstance(v, str) or not v.strip():
+            raise TypeError(f"{what} must hold non-empty strings; got {v!r}")
+    return tuple(names)
+
+
+def _as_units(units: Any, names: tuple[str, ...]) -> dict[str, str]:
+    """``{name: unit}`` for the named variables that have a unit (empty units dropped)."""
+    if units is None:
+        return {}
+    if not isinstance(units, Mapping):
+        raise TypeError("units must be a mapping from variable names to unit strings, e.g. "
+                        f"{{'T': 'K'}}; got {type(units).__name__}")
+    out: dict[str, str] = {}
+    for key, unit in units.items():
+        if key not in names:
+            raise ValueError(f"units names an unknown variable {key!r}; the variables are "
+                             f"{', '.join(names)}")
+        if not isinstance(unit, str):
+            raise TypeError(f"the unit of {key!r} must be a string; got {unit!r}")
+        if unit.strip():
+            out[str(key)] = unit.strip()
+    return out
+
+
+def _as_dt(dt: Any) -> float | None:
+    """The sampling time in seconds: a positive finite number, or None."""
+    if dt is None:
+        return None
+    if isinstance(dt, (bool, np.bool_)) or not isinstance(dt, (int, float, np.integer,
+                                                                 np.floating)):
+        raise TypeError(f"dt must be a number of seconds or None; got {type(dt).__name__}")
+    value = float(dt)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"dt must be a positive finite number of seconds (or None when the "
+                         f"model has no sampling time); got {dt}")
+    return value
+
+
 class Model:
     """Discrete-time model ``x+ = f(x, u, w)`` with state, input and disturbance boxes.
 
@@ -116,15 +169,37 @@ class Model:
         Bounded constraint boxes of x, u and the range of w.
     name : str
         Used in Function names and generated code.
+    state_names, input_names, disturbance_names : sequence of str, optional
+        One name per component of x (n), u (m) and w (l), used in figures and summaries;
+        default ``x1..xn``, ``u1..um``, ``w1..wl``. All names must differ from one another.
+    units : mapping of str to str, optional
+        Unit of some of the named variables, e.g. ``{"T": "K"}``; a variable without an
+        entry has no unit (figures then show its name alone). Default: no units.
+    dt : float, optional
+        Sampling time in seconds (the time between x(k) and x(k + 1)); figures then show
+        time in seconds, otherwise the step k. Default None: no sampling time.
 
     MX symbols and expressions are accepted and converted to SX (``Function.expand``).
+
+    Attributes
+    ----------
+    state_names, input_names, disturbance_names : tuple of str
+        Lengths n, m and l.
+    units : dict of str to str
+        The given units, by variable name.
+    dt : float or None
+        Sampling time in seconds.
 
     Raises
     ------
     FreeSymbolError
         ``f`` depends on symbols other than ``x``, ``u``, ``w``.
     DimensionError
-        Shapes of ``f`` or a box do not match.
+        Shapes of ``f`` or a box do not match, or a list of names has the wrong length.
+    TypeError
+        A name or unit that is not a string, ``dt`` that is not a number.
+    ValueError
+        ``dt <= 0`` (or not finite), repeated names, a unit of an unknown variable.
     ModelError
         ``w`` without ``W`` (or ``W`` without ``w``), non-symbolic ``x``/``u``/``w``.
     EmptySetError, InvalidBoundsError, UnboundedSetError
@@ -140,10 +215,16 @@ class Model:
     (2, 1, 0)
     >>> model.is_linear
     True
+    >>> model = cm.Model(x=x, u=u, f=f, X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-1], [1]),
+    ...                  state_names=["p", "v"], units={"p": "m", "v": "m/s"}, dt=0.1)
+    >>> model.state_names, model.input_names, model.units["v"], model.dt
+    (('p', 'v'), ('u1',), 'm/s', 0.1)
     """
 
     def __init__(self, x: Any, u: Any, f: Any, w: Any = None, X: Any = None, U: Any = None,
-                 W: Any = None, name: str = "model") -> None:
+                 W: Any = None, name: str = "model", *, state_names: Any = None,
+                 input_names: Any = None, disturbance_names: Any = None, units: Any = None,
+                 dt: Any = None) -> None:
         if u is None:
             u = ca.SX.sym("u", 0) if not isinstance(x, ca.MX) else ca.MX.sym("u", 0)
         x, u, w, f = _to_sx(x, u, w, f)
@@ -183,6 +264,17 @@ class Model:
         self.X = _as_model_box(X, n, "X")
         self.U = _as_model_box(U, m, "U")
         self.W = _as_model_box(W, w.numel(), "W") if w is not None else None
+        self.state_names = _as_names(state_names, n, "state_names", "x")
+        self.input_names = _as_names(input_names, m, "input_names", "u")
+        self.disturbance_names = _as_names(disturbance_names, 0 if w is None else w.numel(),
+                                           "disturbance_names", "w")
+        every = self.state_names + self.input_names + self.disturbance_names
+        repeated = sorted({v for v in every if every.count(v) > 1})
+        if repeated:
+            raise ValueError(f"the names of x, u and w must all differ; repeated: "
+                             f"{', '.join(repeated)}")
+        self.units = _as_units(units, every)
+        self.dt = _as_dt(dt)
         self.law: ca.SX | None = None  # set by closed_loop
         self.input_box: Box | None = None  # U of the open-loop model, set by closed_loop
         # closed loops: f(x, law(x), w) in x, w and parameter symbols standing for the
@@ -588,9 +680,10 @@ class Model:
 
         Parameters
         ----------
-        law : array_like (m, n) or casadi.SX (m, 1)
-            A gain matrix ``K`` (``u = K x``) or an expression of ``x`` (and optionally ``w``
-            for measured disturbances is *not* allowed: only ``x``).
+        law : LinearLaw, array_like (m, n) or casadi.SX (m, 1)
+            A :class:`~casadi_cmpc.LinearLaw` ``u = u_eq + K (x - x_eq)``, a bare gain
+            ``K`` (``u = K x``) or an expression of ``x`` only (see
+            :mod:`casadi_cmpc.control.law`).
 
         Returns
         -------
@@ -605,26 +698,15 @@ class Model:
             raise ModelError(f"model '{self.name}' has no input to close the loop on")
         if isinstance(law, ca.MX):
             raise TypeError("give the law as casadi.SX in the model's x (or a gain matrix)")
-        if isinstance(law, ca.SX):
-            if law.numel() != self.m:
-                raise DimensionError(
-                    f"the law must have {self.m} elements (one per input); got shape {law.shape}")
-            law = ca.reshape(law, self.m, 1)
-            allowed = {self.x[i].__hash__() for i in range(self.n)}
-            free = [s for s in ca.symvar(law) if s.__hash__() not in allowed]
-            if free:
-                raise FreeSymbolError("the law may depend on the model's x only; it depends on "
-                                      + ", ".join(str(s) for s in free))
-            law_sx = law
-        else:
-            K = np.atleast_2d(np.asarray(law, dtype=float))
-            if K.shape != (self.m, self.n):
-                raise DimensionError(
-                    f"gain K must have shape (m, n) = ({self.m}, {self.n}); got {K.shape}")
-            law_sx = ca.mtimes(ca.DM(K), self.x)
+        from .control.law import law_expr
+
+        law_sx = law_expr(self, law)  # one convention: LinearLaw, gain (u = K x) or SX
         f_cl = ca.substitute(self.f, self.u, law_sx)
+        names = set(self.state_names + self.disturbance_names)
         cl = Model(x=self.x, u=ca.SX.sym("u", 0), f=f_cl, w=self.w, X=self.X, U=None,
-                   W=self.W, name=name or f"{self.name}_cl")
+                   W=self.W, name=name or f"{self.name}_cl", state_names=self.state_names,
+                   disturbance_names=self.disturbance_names or None, dt=self.dt,
+                   units={k: v for k, v in self.units.items() if k in names})
         cl.law = law_sx
         cl.input_box = self.U
         try:
@@ -733,15 +815,26 @@ class Model:
                 f"e.g. {a} = model.equilibrium({b}, x0=guess)")
 
     def summary(self) -> str:
-        """A short multi-line description: sizes, boxes, detected structure."""
+        """A short multi-line description: sizes, names and units, boxes, sampling time,
+        detected structure."""
+        def named(names: tuple[str, ...]) -> str:
+            return ", ".join(f"{v} [{self.units[v]}]" if v in self.units else v for v in names)
+
         lines = [
             f"Model '{self.name}': n = {self.n} states, m = {self.m} inputs, "
             f"l = {self.l} disturbances",
+            f"  x = ({named(self.state_names)})",
             f"  X = {self.X!r}",
-            f"  U = {self.U!r}" if self.m else "  U = (no input)",
         ]
+        if self.m:
+            lines += [f"  u = ({named(self.input_names)})", f"  U = {self.U!r}"]
+        else:
+            lines.append("  U = (no input)")
         if self.W is not None:
+            lines.append(f"  w = ({named(self.disturbance_names)})")
             lines.append(f"  W = {self.W!r}")
+        lines.append(f"  sampling time dt = {self.dt:g} s" if self.dt is not None
+                     else "  sampling time: not given (time in steps k)")
         if self.law is not None:
             lines.append(f"  closed loop with u = {self.law}")
         lines.append(f"  linear: {self.is_linear}; affine in u: {self.is_affine_in_u}; "
@@ -756,11 +849,18 @@ class Model:
     @classmethod
     def from_ode(cls, x: Any, u: Any, rhs: Any, dt: float, method: str = "euler", w: Any = None,
                  X: Any = None, U: Any = None, W: Any = None, name: str = "model",
-                 substeps: int = 1) -> Model:
+                 substeps: int = 1, *, time_unit: float | None = None,
+                 **labels: Any) -> Model:
         """Discretise ``dx/dt = rhs(x, u, w)`` with a fixed step ``dt`` (time units of rhs).
 
         Parameters
         ----------
+        time_unit : float, optional
+            Seconds per time unit of ``rhs`` (e.g. 60 for an ODE in minutes): the model's
+            sampling time :attr:`dt` is then ``dt * time_unit`` seconds (default: unknown).
+        **labels
+            ``state_names``, ``input_names``, ``disturbance_names``, ``units``: passed on to
+            :class:`Model`.
         method : {"euler", "rk4"}
             Explicit Euler or classical Runge-Kutta 4, with ``substeps`` steps of ``dt/substeps``
             per sample (u and w held constant over the sample).
@@ -801,7 +901,13 @@ class Model:
                 k3 = g(xk + h / 2 * k2, u, *extra)
                 k4 = g(xk + h * k3, u, *extra)
                 xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return cls(x=x, u=u, f=xk, w=w, X=X, U=U, W=W, name=name)
+        bad = set(labels) - {"state_names", "input_names", "disturbance_names", "units"}
+        if bad:
+            raise TypeError(f"from_ode got unexpected keyword(s) {sorted(bad)}")
+        if time_unit is not None and (not np.isfinite(time_unit) or time_unit <= 0):
+            raise ValueError(f"time_unit must be a positive number of seconds; got {time_unit}")
+        secs = None if time_unit is None else float(dt) * float(time_unit)
+        return cls(x=x, u=u, f=xk, w=w, X=X, U=U, W=W, name=name, dt=secs, **labels)
 
 
 def _check_wrt(wrt: str) -> str:

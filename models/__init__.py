@@ -34,6 +34,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..control.law import LinearLaw
 from ..model import Model
 from ..sets.polytope import Polytope, PolytopeUnion
 
@@ -66,7 +67,7 @@ class Example:
         The discrete-time system with its boxes X, U (and W).
     terminal : Polytope, PolytopeUnion or None
         Terminal set of the dual-mode scheme; ``None`` when the example has none.
-    local_law : ndarray (m, n), casadi.SX (m, 1) in ``model.x``, or None
+    local_law : LinearLaw, ndarray (m, n) (u = K x), casadi.SX (m, 1) in ``model.x``, or None
         Local stabilising law on the terminal set: a gain ``K`` (``u = K x``) or an
         expression of the model's state symbols.
     x0s : ndarray, shape (k, n)
@@ -101,7 +102,11 @@ class Example:
                 raise ValueError(f"terminal set of example '{self.name}' has dimension "
                                  f"{self.terminal.dim}, the model has n = {n}")
         law = self.local_law
-        if law is not None and not isinstance(law, ca.SX):
+        if isinstance(law, LinearLaw):
+            if law.shape != (m, n):
+                raise ValueError(f"local law of example '{self.name}' must have a gain of "
+                                 f"shape ({m}, {n}); got {law.shape}")
+        elif law is not None and not isinstance(law, ca.SX):
             K = np.array(law, dtype=float)
             if K.shape != (m, n):
                 raise ValueError(f"local gain of example '{self.name}' must have shape "

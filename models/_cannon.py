@@ -69,5 +69,8 @@ def cannon_model(dt: float, x_max: float, mu: float | None = None,
         x[0] + dt * x[1] + dt * (m_ + (1 - m_) * x[0]) * u,
         dt * x[0] + x[1] + dt * (m_ - 4 * (1 - m_) * x[1]) * u,
     )
+    # the thesis gives no units and no sampling time (dt is a coefficient of the map):
+    # default names x1, x2, u1, time in steps
     return Model(x=x, u=u, f=f, w=w, X=Box([-x_max, -x_max], [x_max, x_max]),
-                 U=Box([-U_MAX], [U_MAX]), W=W, name=name)
+                 U=Box([-U_MAX], [U_MAX]), W=W, name=name,
+                 disturbance_names=["mu"] if w is not None else None)

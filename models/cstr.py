@@ -28,6 +28,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..control.law import LinearLaw
 from ..model import Model
 from ..sets.box import Box
 from ..sets.polytope import Polytope
@@ -49,6 +50,10 @@ C_A_EQ = 0.5  # mol/l
 T_EQ = 350.0  # K
 T_C_EQ = 300.0  # K
 DT = 0.03  # sampling time, min (Euler), (4.20) / (7.9)
+DT_SECONDS = 1.8  # the same in seconds
+# Names of the scaled state x = [C_A - C_A_eq, (T - T_eq)/100] and input (T_c - T_c_eq)/100
+STATE_NAMES = ["C_A - 0.5", "(T - 350)/100"]
+INPUT_NAMES = ["(T_c - 300)/100"]
 # Physical constraints
 C_A_RANGE = (0.0, 1.0)  # mol/l
 T_RANGE = (280.0, 370.0)  # K
@@ -116,8 +121,15 @@ def build() -> Example:
     X = Box([C_A_RANGE[0] - C_A_EQ, (T_RANGE[0] - T_EQ) / 100],
             [C_A_RANGE[1] - C_A_EQ, (T_RANGE[1] - T_EQ) / 100])
     U = Box([(T_C_RANGE[0] - T_C_EQ) / 100], [(T_C_RANGE[1] - T_C_EQ) / 100])
-    model = Model.from_ode(x=x, u=u, rhs=rhs(x, u), dt=DT, method="euler", X=X, U=U,
-                           name="cstr")
+    sampled = Model.from_ode(x=x, u=u, rhs=rhs(x, u), dt=DT, method="euler", X=X, U=U,
+                             name="cstr")
+    # the same map with the names and units of the scaled coordinates (T in K, C_A in
+    # mol/l: x2 = (T - 350)/100 and u = (T_c - 300)/100 are in K) and the sampling time in
+    # seconds (dt = 0.03 min)
+    model = Model(x=sampled.x, u=sampled.u, f=sampled.f, X=X, U=U, name="cstr",
+                  state_names=STATE_NAMES, input_names=INPUT_NAMES,
+                  units=dict(zip(STATE_NAMES + INPUT_NAMES, ("mol/l", "K", "K"), strict=True)),
+                  dt=DT_SECONDS)
     x_eq = model.equilibrium(np.zeros(1), x0=np.zeros(2))
     return Example(
         name="cstr",
@@ -128,7 +140,11 @@ def build() -> Example:
         info={
             "example": "E6, E14",
             "mpc": {"horizon": 10, "alpha": 0.9, "x_ref": x_eq, "u_ref": np.zeros(1),
-                    "local_law": K_LOCAL.copy(), "local_set": Polytope(H_TERMINAL, B_TERMINAL)},
+                    "local_law": LinearLaw(K_LOCAL, x_eq=x_eq, u_eq=np.zeros(1)),
+                    "local_set": Polytope(H_TERMINAL, B_TERMINAL),
+                    # whole plans (alpha = 0.9 per 10 steps) reach the terminal set too
+                    # slowly for the 100 steps of Fig 7.6: the first move is applied
+                    "mode": "receding"},
             "sequence": {"eps": 0.002, "robust": False,
                          "note": "one-step MPC along the controllable sets (§7.2), then "
                                  "u = K x inside (7.10)"},

@@ -67,7 +67,7 @@ def build() -> Example:
     )
     model = Model(x=x, u=u, f=f, w=w, X=Box([-X_MAX, -X_MAX], [X_MAX, X_MAX]),
                   U=Box([-U_MAX], [U_MAX]), W=Box([-W_MAX, P_RANGE[0]], [W_MAX, P_RANGE[1]]),
-                  name="khalil_affine_control")
+                  name="khalil_affine_control", disturbance_names=["w", "p"])
     return Example(
         name="khalil_affine_control",
         model=model,

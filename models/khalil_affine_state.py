@@ -63,7 +63,7 @@ def build() -> Example:
     )
     model = Model(x=x, u=u, f=f, w=w, X=Box([-X_MAX, -X_MAX], [X_MAX, X_MAX]),
                   U=Box([-U_MAX], [U_MAX]), W=Box([-W_MAX], [W_MAX]),
-                  name="khalil_affine_state")
+                  name="khalil_affine_state", disturbance_names=["w"])
     return Example(
         name="khalil_affine_state",
         model=model,

@@ -81,6 +81,12 @@ def rest_state(pose: Any, delay: int = DELAY) -> np.ndarray:
     return np.concatenate([p, p, np.zeros(2 * (int(delay) - 1))])
 
 
+def state_names(delay: int = DELAY) -> list[str]:
+    """Names of the states: the pose, the previous pose and the buffered inputs."""
+    return (["x", "y", "theta", "x(k-1)", "y(k-1)", "theta(k-1)"]
+            + [f"u{j}(k-{i})" for i in range(int(delay) - 1, 0, -1) for j in (1, 2)])
+
+
 def pose(z: Any) -> np.ndarray:
     """The current pose ``(x, y, theta)`` of states ``z``, shape (N, 3) or (3,)."""
     return np.asarray(z, dtype=float)[..., :3]
@@ -105,8 +111,13 @@ def build(delay: int = DELAY) -> Example:
     pose_lo = [FIELD[0][0], FIELD[1][0], -THETA_MAX]
     pose_hi = [FIELD[0][1], FIELD[1][1], THETA_MAX]
     X = Box(pose_lo * 2 + [-U_MAX] * (2 * (d - 1)), pose_hi * 2 + [U_MAX] * (2 * (d - 1)))
+    names = state_names(d)
+    # units as chosen above (the thesis gives none); no sampling time is known
+    units = {v: "cm" if v[0] in "xy" else "rad" if v.startswith("theta") else "%"
+             for v in names}
+    units.update({"u1": "%", "u2": "%"})
     model = Model(x=z, u=u, f=f, X=X, U=Box([-U_MAX, -U_MAX], [U_MAX, U_MAX]),
-                  name="mirosot")
+                  name="mirosot", state_names=names, input_names=["u1", "u2"], units=units)
     # MPC (7.6)-(7.7): distance to the target pose (x, y, THETA_WEIGHT theta) contracts;
     # keep-out discs of radius D around the obstacles
     C = np.zeros((3, n))
@@ -125,7 +136,10 @@ def build(delay: int = DELAY) -> Example:
             "example": "E13",
             "mpc": {"horizon": HORIZON, "alpha": ALPHA, "norm": 2, "contract": C, "Q": Q,
                     "R": 1e-3 * np.eye(2), "x_ref": rest_state(TARGET_POSE, d),
-                    "u_ref": np.zeros(2), "constraints": avoid},
+                    "u_ref": np.zeros(2), "constraints": avoid,
+                    # applying whole plans reaches states where no horizon-12 plan exists
+                    # (proven): the first move of each plan is applied instead
+                    "mode": "receding"},
             "run": {"steps": 60, "obstacles": OBSTACLES.copy(), "D": D_MIN,
                     "note": "contractive MPC of the distance to the target pose (alpha = "
                             "0.95, N = 12) with keep-out discs of radius D around the "
@@ -137,6 +151,7 @@ def build(delay: int = DELAY) -> Example:
             "horizon": HORIZON,
             "state_layout": ["x(k)", "y(k)", "theta(k)", "x(k-1)", "y(k-1)", "theta(k-1)"]
             + [f"u{j}(k-{i})" for i in range(d - 1, 0, -1) for j in (1, 2)],
+            "plot_states": [0, 1, 2],  # the current pose; the others are delayed copies
             "delay": d,
             "U": U_MAX,
             "D": D_MIN,

@@ -613,3 +613,78 @@ def test_a_call_kept_by_never_inline_is_taken_as_nonlinear():
     assert not M.is_linear and not M.is_affine_in_u and not M.is_affine_in_w
     assert M.nonlinear_states == (0, 1)
     assert "linear: False" in M.summary()
+
+
+# ------------------------------------------------------------ names, units, sampling time
+def _named(**kw):
+    x, u, w = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("w")
+    return cm.Model(x=x, u=u, w=w, f=ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * u + w),
+                    X=X2, U=U1, W=cm.Box([-0.1], [0.1]), **kw)
+
+
+def test_names_units_and_dt_default_and_are_stored():
+    M = _named()
+    assert M.state_names == ("x1", "x2") and M.input_names == ("u1",)
+    assert M.disturbance_names == ("w1",) and M.units == {} and M.dt is None
+    assert "sampling time: not given" in M.summary()
+    M = _named(state_names=["C_A", "T"], input_names=["T_c"], disturbance_names=["q"],
+               units={"C_A": "mol/l", "T": "K", "T_c": "K", "q": ""}, dt=1.8)
+    assert M.state_names == ("C_A", "T") and M.input_names == ("T_c",)
+    assert M.disturbance_names == ("q",)
+    assert M.units == {"C_A": "mol/l", "T": "K", "T_c": "K"}  # an empty unit is no unit
+    assert M.dt == 1.8
+    s = M.summary()
+    assert "x = (C_A [mol/l], T [K])" in s and "u = (T_c [K])" in s and "w = (q)" in s
+    assert "dt = 1.8 s" in s
+
+
+def test_names_of_the_wrong_length_are_refused():
+    with pytest.raises(DimensionError, match="state_names .*expected 2 .* instead of 3"):
+        _named(state_names=["a", "b", "c"])
+    with pytest.raises(DimensionError, match="input_names .*expected 1 .* instead of 2"):
+        _named(input_names=["a", "b"])
+    with pytest.raises(DimensionError, match="disturbance_names .*expected 1 .* instead of 0"):
+        _named(disturbance_names=[])
+    with pytest.raises(TypeError, match="non-empty strings"):
+        _named(state_names=["a", 3])
+    with pytest.raises(TypeError, match="non-empty strings"):
+        _named(state_names=["a", " "])
+    with pytest.raises(ValueError, match="must all differ; repeated: a"):
+        _named(state_names=["a", "b"], input_names=["a"])
+
+
+@pytest.mark.parametrize("dt", [0, 0.0, -1.8, float("nan"), float("inf")])
+def test_dt_must_be_positive_seconds(dt):
+    with pytest.raises(ValueError, match="dt must be a positive finite number of seconds"):
+        _named(dt=dt)
+
+
+@pytest.mark.parametrize("dt", [True, "1.8", [1.8]])
+def test_dt_must_be_a_number(dt):
+    with pytest.raises(TypeError, match="dt must be a number of seconds or None"):
+        _named(dt=dt)
+
+
+def test_units_must_name_known_variables():
+    with pytest.raises(ValueError, match="unknown variable 'T'.*x1, x2, u1, w1"):
+        _named(units={"T": "K"})
+    with pytest.raises(TypeError, match="mapping"):
+        _named(units=["K", "K"])
+    with pytest.raises(TypeError, match="unit of 'x1' must be a string"):
+        _named(units={"x1": 3})
+
+
+def test_from_ode_passes_names_units_and_the_sampling_time_in_seconds():
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    rhs = ca.vertcat(x[1], -x[0] + u)
+    box = {"X": cm.Box([-1, -1], [1, 1]), "U": cm.Box([-1], [1])}
+    m = cm.Model.from_ode(x, u, rhs, dt=0.03, time_unit=60.0, **box, state_names=["c", "T"],
+                          input_names=["Tc"], units={"c": "mol/l", "T": "K", "Tc": "K"})
+    assert m.dt == pytest.approx(1.8) and list(m.state_names) == ["c", "T"]
+    assert m.units["T"] == "K" and list(m.input_names) == ["Tc"]
+    assert cm.Model.from_ode(x, u, rhs, dt=0.1, **box).dt is None  # time unit unknown
+    with pytest.raises(ValueError, match="time_unit"):
+        cm.Model.from_ode(x, u, rhs, dt=0.1, time_unit=0.0, **box)
+    with pytest.raises(TypeError, match="unexpected"):
+        cm.Model.from_ode(x, u, rhs, dt=0.1, colour="red", **box)

@@ -341,6 +341,13 @@ def pre_set(model: Model, target: Any, within_X: bool = True) -> Polytope | Poly
     return _pre_polytope(model, target, within_X)
 
 
+def _members(S: Any) -> list:
+    """The polytopes of a set: the members of a union, or the set itself."""
+    if isinstance(S, PolytopeUnion):
+        return list(S.polytopes)
+    return list(S.members) if hasattr(S, "members") else [S]
+
+
 @dataclass
 class SetSequence:
     """A nested sequence of sets K_0 = T, K_1, K_2, ... (K_i: states controllable in i steps).
@@ -520,15 +527,44 @@ class SetSequence:
 
     # ------------------------------------------------------------------ drawing
     def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), cmap: str = "viridis",
-             colorbar: bool = True, **kw: Any) -> Any:
-        """Draw the sets from the largest (back) to the target (front), coloured by step,
-        with a colour bar as the key (step i = K_i)."""
+             colorbar: bool = True, *, model: Model | None = None, legend: bool = True,
+             **kw: Any) -> Any:
+        """Draw the sets from the largest (back) to the target (front), coloured by step.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Created when omitted (equal aspect).
+        dims : (int, int)
+            States on the horizontal and vertical axes.
+        cmap : str
+            Sequential colour map of the steps i (K_0 = T at its low end).
+        colorbar : bool
+            Add a colour bar as the key of the steps (step i = K_i).
+        model : Model, optional
+            The model of the sequence: X is drawn as a dashed rectangle and the axes are
+            labelled with its state names and units (``"name [unit]"``); without it the
+            labels are ``info["state_names"]`` (or ``x1, x2``).
+        legend : bool
+            Add a legend outside the axes (below): X, the terminal set T and the meaning
+            of white (unfilled) space, where nothing is proven.
+        **kw
+            Passed to matplotlib for every set (``alpha``, ``edgecolor``, ...).
+
+        Returns
+        -------
+        matplotlib Axes
+            The sets K_i (boxes or polytopes) filled in the colour of step i, T outlined
+            in magenta, X dashed.
+        """
         import matplotlib as mpl
         import matplotlib.pyplot as plt
+        from matplotlib.patches import Patch, Rectangle
 
-        from ..plot import new_axes, plot_boxes
+        from ..plot import axis_label, legend_outside, new_axes, plot_boxes, variable_labels
 
         ax = new_axes(ax)
+        i_d, j_d = int(dims[0]), int(dims[1])
         k = max(len(self.sets), 2)
         cm_ = plt.get_cmap(cmap)
         norm = mpl.colors.Normalize(vmin=0, vmax=k - 1)
@@ -543,29 +579,74 @@ class SetSequence:
                                edgecolor=edge, **kw)
                 continue
             S = self.sets[i] if st is None or st.get("polytope") is None else st["polytope"]
-            members = S.polytopes if isinstance(S, PolytopeUnion) else (
-                S.members if hasattr(S, "members") else [S])
-            for P in members:
+            for P in _members(S):
                 if isinstance(P, Polytope) and not P.is_empty():
                     P.plot(ax=ax, dims=dims, facecolor=col, alpha=alpha,
                            edgecolor="k", **kw)
+        # T on top, outlined (its fill is the colour of step 0)
+        if self.sets:
+            first = True
+            for P in _members(self.sets[0]):
+                if isinstance(P, Polytope) and not P.is_empty():
+                    P.plot(ax=ax, dims=dims, facecolor="none", edgecolor="magenta", alpha=1.0,
+                           linewidth=1.8, label="T = K_0 (terminal set)" if first else None)
+                    first = False
+        if model is not None:
+            X = model.X
+            ax.add_patch(Rectangle((X.lo[i_d], X.lo[j_d]), X.hi[i_d] - X.lo[i_d],
+                                   X.hi[j_d] - X.lo[j_d], fill=False, edgecolor="k",
+                                   linestyle="--", linewidth=1.0, label="X (state box)"))
+            ax.update_datalim([[X.lo[i_d], X.lo[j_d]], [X.hi[i_d], X.hi[j_d]]])
+            ax.autoscale_view()
         if colorbar:
             sm = mpl.cm.ScalarMappable(norm=norm, cmap=cm_)
             ax.figure.colorbar(sm, ax=ax, label="step i (set K_i)")
-        names = self.info.get("state_names")
-        ax.set_xlabel(names[dims[0]] if names else f"x{dims[0] + 1}")
-        ax.set_ylabel(names[dims[1]] if names else f"x{dims[1] + 1}")
+        if model is not None:
+            names, units = variable_labels(model, "x")
+        else:
+            names = list(self.info.get("state_names") or [])
+            units = [None] * len(names)
+        ax.set_xlabel(axis_label(names[i_d], units[i_d]) if len(names) > i_d
+                      else f"x{i_d + 1}")
+        ax.set_ylabel(axis_label(names[j_d], units[j_d]) if len(names) > j_d
+                      else f"x{j_d + 1}")
+        if legend:  # the key of white space is in the legend only
+            legend_outside(ax, where="below", ncol=2, extra=[Patch(
+                facecolor="white", edgecolor="0.4", linewidth=0.8,
+                label="white (unfilled): not proven controllable")])
         return ax
 
     # -------------------------------------------------------------- persistence
     def save(self, path: Any) -> Any:
-        """Save the sequence exactly (sets, steps, status) to ``.npz`` or ``.json``."""
+        """Save the sequence exactly (sets, steps, status, info) to ``.npz`` or ``.json``.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file written; it must end in ``.npz`` (compressed binary) or ``.json``
+            (text).
+
+        Returns
+        -------
+        pathlib.Path
+            The written file.
+
+        Notes
+        -----
+        A set ``K_i`` that is ``T`` together with the boxes of steps 1..i (as
+        :func:`~casadi_cmpc.controllable_sets` builds it) is stored as that reference, not
+        as a copy of the boxes (the copies grow with the square of the number of steps).
+        In ``.npz`` files every array is a binary entry of a compressed archive; the
+        structure is a JSON entry. :meth:`load` (and :func:`casadi_cmpc.load_set`)
+        rebuild an equal sequence: the same arrays bit for bit.
+        """
+        import json
         from pathlib import Path
 
-        from ..sets.base import _save_state
+        from ..sets.base import _FORMAT_VERSION, _check_suffix, _encode, _save_state
 
         state = {
-            "sets": [{"type": S._type_name, "state": S._state()} for S in self.sets],
+            "sets": [self._set_state(i, S) for i, S in enumerate(self.sets)],
             "converged_at": -1 if self.converged_at is None else int(self.converged_at),
             "status": self.status,
             "steps": [{k: ({"type": v._type_name, "state": v._state()}
@@ -574,11 +655,69 @@ class SetSequence:
             "info": {k: v for k, v in self.info.items()
                      if isinstance(v, (str, int, float, bool, list, np.ndarray))},
         }
-        return _save_state("SetSequence", state, Path(path))
+        path = Path(path)
+        _check_suffix(path, "save a set to")
+        if path.suffix.lower() == ".json":
+            return _save_state("SetSequence", state, path)
+        arrays: dict[str, np.ndarray] = {}
+        meta = {"type": "SetSequence", "format": _FORMAT_VERSION,
+                "state": {k: _encode(_to_refs(v, arrays)) for k, v in state.items()}}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # through a file object: numpy would append '.npz' to a name without it
+        with open(path, "wb") as fh:
+            np.savez_compressed(fh, __meta__=np.array(json.dumps(meta)),
+                                **{f"a_{k}": v for k, v in arrays.items()})
+        return path
+
+    def _set_state(self, i: int, S: Any) -> dict[str, Any]:
+        """The stored form of ``K_i``: a reference to T and the boxes of steps 1..i when
+        ``K_i`` is exactly their union, else the set's own state."""
+        from ..sets.paving import Paving
+        from ..sets.union import SetUnion
+
+        plain = {"type": S._type_name, "state": S._state()}
+        if i == 0 or i > len(self.steps) or not isinstance(S, SetUnion) \
+                or len(S.members) != 2:
+            return plain
+        T, P = S.members
+        if not isinstance(P, Paving) or P.boundary.shape[0] or P.outside.shape[0] \
+                or not (T is self.sets[0] or _same_state(T, self.sets[0])):
+            return plain
+        boxes = [st.get("boxes") for st in self.steps[:i]]
+        if any(not isinstance(b, np.ndarray) for b in boxes):
+            return plain
+        cum = np.concatenate([np.asarray(b, dtype=float).reshape(-1, P.dim, 2)
+                              for b in boxes])
+        if cum.shape != P.inner.shape or cum.tobytes() != P.inner.tobytes():
+            return plain
+        return {"type": _STEPS_UNION, "state": {
+            "dim": P.dim, "n_discarded": P.n_discarded,
+            "domain": None if P.domain is None else P.domain.as_array()}}
 
     @classmethod
     def load(cls, path: Any) -> SetSequence:
-        """Load a sequence written by :meth:`save`."""
+        """Load a sequence written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+            A ``.npz`` or ``.json`` file written by :meth:`save`.
+
+        Returns
+        -------
+        SetSequence
+            Equal to the saved one: the same sets, steps (arrays bit for bit), status,
+            ``converged_at`` and info.
+
+        Raises
+        ------
+        ValueError
+            The file is not a set file written by ``save``.
+        TypeError
+            The file holds another kind of set.
+        FileNotFoundError
+            No file at ``path``.
+        """
         from ..sets.base import load_set
 
         obj = load_set(path)
@@ -589,17 +728,78 @@ class SetSequence:
     @classmethod
     def _from_state(cls, state: dict[str, Any]) -> SetSequence:
         from ..sets.base import _TYPES
+        from ..sets.paving import Paving
+        from ..sets.union import SetUnion
+
+        arrays = {k: v for k, v in state.items() if isinstance(v, np.ndarray)}
+        state = {k: _from_refs(v, arrays) for k, v in state.items() if k not in arrays}
 
         def build(d: Any) -> Any:
             if isinstance(d, dict) and set(d) == {"type", "state"}:
                 return _TYPES[d["type"]]._from_state(d["state"])
             return d
 
-        sets = [build(d) for d in state["sets"]]
         steps = [{k: build(v) for k, v in st.items()} for st in state["steps"]]
+        sets: list[Any] = []
+        for i, d in enumerate(state["sets"]):
+            if isinstance(d, dict) and d.get("type") == _STEPS_UNION:
+                st = d["state"]
+                n = int(st["dim"])
+                inner = np.concatenate([np.asarray(s["boxes"], dtype=float).reshape(-1, n, 2)
+                                        for s in steps[:i]])
+                sets.append(SetUnion([sets[0], Paving(
+                    inner=inner, domain=st["domain"], n_discarded=int(st["n_discarded"]))],
+                    dim=n))
+            else:
+                sets.append(build(d))
         conv = int(state["converged_at"])
         return cls(sets=sets, converged_at=None if conv < 0 else conv,
                    info=dict(state.get("info", {})), status=str(state["status"]), steps=steps)
+
+
+# the stored form of a K_i that is T plus the boxes of steps 1..i (see SetSequence.save)
+_STEPS_UNION = "SetSequence.steps_union"
+
+
+def _same_state(S1: Any, S2: Any) -> bool:
+    """Same type and the same stored state (arrays bit for bit)."""
+    return type(S1) is type(S2) and _same_value(S1._state(), S2._state())
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    """Equality of nested dicts, lists and arrays, arrays bit for bit (dtype and shape)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b, strict=True))
+    return type(a) is type(b) and a == b
+
+
+def _to_refs(v: Any, arrays: dict[str, np.ndarray]) -> Any:
+    """``v`` with every array replaced by ``{"__ref__": key}`` (the array in ``arrays``)."""
+    if isinstance(v, np.ndarray):
+        key = f"ref{len(arrays)}"
+        arrays[key] = v
+        return {"__ref__": key}
+    if isinstance(v, dict):
+        return {k: _to_refs(x, arrays) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_to_refs(x, arrays) for x in v]
+    return v
+
+
+def _from_refs(v: Any, arrays: dict[str, np.ndarray]) -> Any:
+    """The inverse of :func:`_to_refs`."""
+    if isinstance(v, dict):
+        if set(v) == {"__ref__"} and v["__ref__"] in arrays:
+            return arrays[v["__ref__"]]
+        return {k: _from_refs(x, arrays) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_from_refs(x, arrays) for x in v]
+    return v
 
 
 def _register() -> None:
