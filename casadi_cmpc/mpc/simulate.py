@@ -19,6 +19,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import InterruptScope
 from .._validate import as_float_array
 from ..exceptions import DimensionError, InvalidBoundsError, ModelError
 from ..model import Model
@@ -26,9 +27,13 @@ from ..model import Model
 __all__ = ["simulate", "Trajectory"]
 
 _FORMAT = "casadi_cmpc.Trajectory"
-_FORMAT_VERSION = 1
+_FORMAT_VERSION = 2  # 2: per-step levels of set-sequence controllers
 _STOP_REASONS = ("steps", "stop_when", "interrupted", "diverged")
-_LIST_FIELDS = ("status", "certificate", "horizon", "mode")
+_LIST_FIELDS = ("status", "certificate", "horizon", "mode", "level")
+# the kind of a step, from the mode the controller reported
+_SOLVER_MODES = frozenset({"mpc"})
+_LAW_MODES = frozenset({"local_law"})
+_STEP_KINDS = ("solver", "local_law", "other")
 
 
 # --------------------------------------------------------------------------- Trajectory
@@ -53,7 +58,9 @@ class Trajectory:
         ``last_info["certificate"]`` per step (e.g. ``"verified"``, ``"unverified"``,
         ``"proved_infeasible"``, ``"undecided"``, ``"local_law"``); None when not reported.
     horizon : tuple of (int or None), length K
-        ``last_info["horizon"]`` per step; None when not reported.
+        ``last_info["horizon"]`` per step; None when not reported. For a controller along
+        a set sequence (:class:`~casadi_cmpc.SetSequenceMPC`) these numbers are the levels
+        of the sequence, not prediction horizons: see ``level``.
     solve_time : ndarray, shape (K,)
         Seconds per step reported as ``last_info["solve_time"]``; where the controller does
         not report one, the wall-clock time of the call measured by the simulator.
@@ -63,6 +70,11 @@ class Trajectory:
         ``last_info["mode"]`` per step (e.g. ``"mpc"``, ``"sequence"``, ``"local_law"``,
         ``"fallback"``); ``"feedback"`` for a plain callable or gain, ``"autonomous"`` for
         a model without input.
+    level : tuple of (int or None), length K
+        For a controller along a set sequence ``K_0 = T, K_1, ...``: the level ``i(k)``,
+        the index of the set ``K_i`` that held ``x(k)`` (``last_info["level"]``, or the
+        ``"horizon"`` a :class:`~casadi_cmpc.SetSequenceMPC` reports); None for other
+        controllers. Given empty, it is None at every step.
     violations : mapping
         ``"state"``: number of states ``x(k)``, ``k >= 1``, outside the model's X;
         ``"input"``: number of inputs ``u(k)`` outside U; ``"state_steps"``,
@@ -81,6 +93,10 @@ class Trajectory:
         The seed of the random disturbances (None when a Generator or None was given).
     model_name : str
         Name of the model (kept when the model itself is not).
+
+    See Also
+    --------
+    step_kind : which steps used the solver, the local law, or neither.
 
     Examples
     --------
@@ -109,6 +125,7 @@ class Trajectory:
     disturbance: str = "none"
     seed: int | None = None
     model_name: str = ""
+    level: tuple = ()
 
     def __post_init__(self) -> None:
         x = np.array(self.x, dtype=float)
@@ -131,6 +148,8 @@ class Trajectory:
         values: dict[str, Any] = {}
         for name in _LIST_FIELDS:
             seq = tuple(getattr(self, name))
+            if name == "level":
+                seq = tuple(None if v is None else int(v) for v in seq) or (None,) * K
             if len(seq) != K:
                 raise DimensionError(f"{name} must have one entry per step ({K}); got {len(seq)}")
             values[name] = seq
@@ -176,6 +195,18 @@ class Trajectory:
         """The last state ``x(K)``, shape (n,)."""
         return self.x[-1]
 
+    @property
+    def step_kind(self) -> tuple[str, ...]:
+        """What computed ``u(k)``, per step (length K), from the reported ``mode``.
+
+        ``"solver"``: the controller solved its optimisation problem (mode ``"mpc"``);
+        ``"local_law"``: the local law was applied, no solver (mode ``"local_law"``);
+        ``"other"``: anything else (a gain or plain callable, a move of a stored sequence,
+        the reference input, a step without a reported mode).
+        """
+        return tuple("solver" if m in _SOLVER_MODES else "local_law" if m in _LAW_MODES
+                     else "other" for m in self.mode)
+
     def __len__(self) -> int:
         return self.steps
 
@@ -191,18 +222,30 @@ class Trajectory:
         Keys: ``model``, ``n``, ``m``, ``l``, ``steps``, ``stop_reason``, ``interrupted``,
         ``disturbance``, ``seed``, ``x0``, ``final_state``, ``final_norm_inf`` (max-norm of
         ``x(K)``), ``violations`` (counts and step indices), ``certificates``, ``statuses``,
-        ``modes`` (counts per value, ``"none"`` for None), ``horizons`` (histogram, keys
-        are the horizons as strings), ``solve_time`` and ``call_time`` (``min``,
-        ``median``, ``max``, ``mean``, ``total`` in s; None for a run of 0 steps).
-        Non-finite numbers (a diverged run) are written as None.
+        ``modes`` (counts per value, ``"none"`` for None), ``step_kinds`` (steps per
+        :attr:`step_kind`: ``"solver"``, ``"local_law"``, ``"other"``; they add up to
+        ``steps``), ``horizons`` (histogram of the prediction horizons, keys as strings,
+        over the steps that report no level), ``levels`` (histogram of the set-sequence
+        levels ``i(k)``; empty for other controllers), ``solve_time`` (``min``,
+        ``median``, ``max``, ``mean``, ``total`` in s over the steps that used the solver
+        only, and ``steps``, how many those are; the figures are None when no step used
+        it) and ``call_time`` (the same figures over all steps of the run, as measured by
+        the simulator; None for a run of 0 steps). Non-finite numbers (a diverged run)
+        are written as None.
         """
         def counts(values: tuple) -> dict[str, int]:
             c = Counter("none" if v is None else str(v) for v in values)
             return dict(sorted(c.items()))
 
-        hist = Counter(self.horizon)
-        horizons = {("none" if h is None else str(h)): int(c) for h, c in
+        def histogram(values: list) -> dict[str, int]:
+            hist = Counter(values)
+            return {("none" if h is None else str(h)): int(c) for h, c in
                     sorted(hist.items(), key=lambda kv: (kv[0] is None, kv[0] or 0))}
+
+        kinds = self.step_kind
+        solver = np.array([k == "solver" for k in kinds], dtype=bool)
+        solve_time = _time_stats(self.solve_time[solver])
+        solve_time["steps"] = int(solver.sum())
         return {
             "model": self.model_name,
             "n": int(self.x.shape[1]),
@@ -222,8 +265,11 @@ class Trajectory:
             "certificates": counts(self.certificate),
             "statuses": counts(self.status),
             "modes": counts(self.mode),
-            "horizons": horizons,
-            "solve_time": _time_stats(self.solve_time),
+            "step_kinds": {k: kinds.count(k) for k in _STEP_KINDS},
+            "horizons": histogram([h for h, lv in zip(self.horizon, self.level, strict=True)
+                                   if lv is None]),
+            "levels": histogram([lv for lv in self.level if lv is not None]),
+            "solve_time": solve_time,
             "call_time": _time_stats(self.call_time),
         }
 
@@ -239,6 +285,7 @@ class Trajectory:
             "disturbance": self.disturbance, "seed": self.seed,
             "status": list(self.status), "certificate": list(self.certificate),
             "horizon": list(self.horizon), "mode": list(self.mode),
+            "level": list(self.level),
             "violations": {k: (list(v) if isinstance(v, tuple) else v)
                            for k, v in self.violations.items()},
         }
@@ -297,16 +344,31 @@ class Trajectory:
             raise ValueError(f"'{path}' does not hold a saved Trajectory")
         return cls(**arrays, status=tuple(data["status"]),
                    certificate=tuple(data["certificate"]), horizon=tuple(data["horizon"]),
-                   mode=tuple(data["mode"]), violations=data["violations"], model=model,
+                   mode=tuple(data["mode"]), level=tuple(data.get("level", ())),
+                   violations=data["violations"], model=model,
                    stop_reason=data["stop_reason"], disturbance=data["disturbance"],
                    seed=data["seed"], model_name=data["model_name"])
 
     # ------------------------------------------------------------------- plot
     def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), **kw: Any) -> Any:
-        """Draw the phase plane and the time series of states and inputs.
+        """Draw the phase plane and the time series of states, inputs and disturbances.
 
-        See :func:`casadi_cmpc.plot.plot_trajectory` for the keywords (``sets``,
-        ``obstacles``, ``state_names``, ``input_names``, ``title``).
+        Axis labels are the model's names and units (``"name [unit]"``), time is in
+        seconds when the model has a sampling time ``dt`` (else the step k).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, sequence of Axes, or None
+            Where to draw (see :func:`casadi_cmpc.plot.plot_trajectory`).
+        dims : (int, int)
+            States on the axes of the phase plane.
+        **kw
+            Keywords of :func:`casadi_cmpc.plot.plot_trajectory`: ``sets``, ``obstacles``,
+            ``obstacle_label``, ``state_names``, ``input_names``, ``disturbance_names``,
+            ``states``, ``disturbance``, ``horizon`` (default ``"auto"``: a panel of the
+            level i(k) of a run along a set sequence, when :attr:`level` records one;
+            ``"horizon"``: the horizon N(k) of a contractive MPC), ``equal_aspect``,
+            ``title``.
 
         Returns
         -------
@@ -315,6 +377,50 @@ class Trajectory:
         from ..plot import plot_trajectory
 
         return plot_trajectory(self, ax=ax, dims=dims, **kw)
+
+
+def _summary_lines(s: Mapping[str, Any]) -> list[str]:
+    """Lines that say what a run's :meth:`Trajectory.summary` ``s`` counts: which steps used
+    the solver, the solve time over those only, and the levels of a set sequence or the
+    prediction horizons (never one for the other)."""
+    kinds = s.get("step_kinds") or {}
+    n_solver, n_law, n_other = (int(kinds.get(k, 0)) for k in _STEP_KINDS)
+    total = n_solver + n_law + n_other
+
+    def plural(k: int, word: str) -> str:
+        return f"{k} {word}{'' if k == 1 else 's'}"
+
+    parts = [f"{n_solver} used the solver", f"{n_law} the local law (no solver)"]
+    if n_other:
+        modes = {m: c for m, c in (s.get("modes") or {}).items()
+                 if m not in _SOLVER_MODES | _LAW_MODES}
+        parts.append(f"{n_other} neither" + (" (mode " + ", ".join(
+            f"{m}: {c}" for m, c in modes.items()) + ")" if modes else ""))
+    lines = [f"steps: {total}, of which " + ", ".join(parts)]
+    st = s.get("solve_time") or {}
+    if st.get("median") is not None:
+        lines.append(f"solve time per solver step ({plural(n_solver, 'step')}): median "
+                     f"{st['median'] * 1e3:.3g} ms, max {st['max'] * 1e3:.3g} ms")
+    else:
+        lines.append("solve time: no step used the solver")
+    levels = sorted(((int(k), int(c)) for k, c in (s.get("levels") or {}).items()),
+                    reverse=True)
+    if levels:
+        # consecutive levels with the same count as one group: "i = 13..1: 1 step each"
+        groups: list[list[int]] = []
+        for i, c in levels:
+            if groups and groups[-1][1] == i + 1 and groups[-1][2] == c:
+                groups[-1][1] = i
+            else:
+                groups.append([i, i, c])
+        lines.append("level i(k) of the set sequence (x(k) in K_i, K_0 = T): " + ", ".join(
+            f"i = {a}: {plural(c, 'step')}" if a == b else
+            f"i = {a}..{b}: {plural(c, 'step')} each" for a, b, c in groups))
+    horizons = {k: c for k, c in (s.get("horizons") or {}).items() if k != "none"}
+    if horizons:
+        lines.append("prediction horizons used: " + ", ".join(
+            f"N = {k}: {plural(c, 'step')}" for k, c in horizons.items()))
+    return lines
 
 
 def _json_float(v: float) -> float | None:
@@ -356,6 +462,10 @@ class _Controller:
         self.source = ctrl
         self.reports = False
         self.mode = "feedback"
+        # the "horizon" a set-sequence controller reports is the level of the state
+        from .sequence import SetSequenceMPC
+
+        self.levels = isinstance(ctrl, SetSequenceMPC)
         if ctrl is None:
             if m > 0:
                 raise TypeError(f"ctrl is None but model '{model.name}' has m = {m} input(s); "
@@ -538,7 +648,10 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
         Refuse an ``x0`` outside X (default). With False the run starts anyway; ``x(0)`` is
         never counted as a violation.
     progress : bool or None
-        tqdm progress bar; None: shown only when the run lasts more than 2 s.
+        tqdm progress bar; None: shown only when the run lasts more than 2 s. Its total is
+        ``steps`` only when the run has no other end; with ``stop_when`` the bar counts
+        the steps done (at most ``steps``), and a run that ends normally closes it with its
+        total equal to the steps done.
 
     Returns
     -------
@@ -602,6 +715,7 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
     certificate: list[Any] = []
     horizon: list[Any] = []
     mode: list[Any] = []
+    level: list[Any] = []
     solve_time: list[float] = []
     call_time: list[float] = []
     done = 0
@@ -610,9 +724,13 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # tqdm.auto without ipywidgets warns, then uses text
         from tqdm.auto import tqdm
-    bar = tqdm(total=steps, desc=f"simulate {model.name}", unit="step",
-               disable=progress is False or steps == 0, delay=0 if progress else 2.0,
-               leave=False)
+    bar = tqdm(total=_bar_total(steps, stop_when), desc=f"simulate {model.name}",
+               unit="step", disable=progress is False or steps == 0,
+               delay=0 if progress else 2.0, leave=False)
+    if stop_when is not None and not bar.disable:
+        bar.set_postfix_str(f"stops when stop_when holds, at most {steps} steps",
+                            refresh=False)
+    scope = InterruptScope()
     try:
         for k in range(steps):
             x = xs[k]
@@ -631,10 +749,10 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
             info = controller.info()
             w = w_at(k, x)
             x_next = np.asarray(F(x, u, w), dtype=float).reshape(n)
-            rec = _record(info, controller.mode, elapsed)
+            rec = _record(info, controller.mode, elapsed, controller.levels)
             # commit the step only when all of it is computed
             us[k], ws[k], xs[k + 1] = u, w, x_next
-            for lst, v in zip((status, certificate, horizon, mode, solve_time),
+            for lst, v in zip((status, certificate, horizon, mode, solve_time, level),
                               rec, strict=True):
                 lst.append(v)
             call_time.append(elapsed)
@@ -648,9 +766,11 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
                               RuntimeWarning, stacklevel=2)
                 break
     except KeyboardInterrupt:
+        scope.reraise_if_nested()
         reason = "interrupted"
     finally:
-        bar.close()
+        scope.close()
+        _close_bar(bar, done, reason)
 
     x_arr, u_arr = xs[:done + 1], us[:done]
     return Trajectory(
@@ -659,14 +779,15 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
         mode=tuple(mode), violations=_count_violations(model, x_arr, u_arr), model=model,
         stop_reason=reason, disturbance=label,
         seed=int(seed) if isinstance(seed, (int, np.integer)) else None,
-        model_name=model.name)
+        model_name=model.name, level=tuple(level))
 
 
-def _record(info: Mapping[str, Any] | None, mode: str, elapsed: float
-            ) -> tuple[Any, Any, Any, Any, float]:
-    """(status, certificate, horizon, mode, solve_time) of one step."""
+def _record(info: Mapping[str, Any] | None, mode: str, elapsed: float, levels: bool = False
+            ) -> tuple[Any, Any, Any, Any, float, Any]:
+    """(status, certificate, horizon, mode, solve_time, level) of one step; ``levels``: the
+    controller's ``"horizon"`` is a set-sequence level (used when it reports no ``"level"``)."""
     if info is None:
-        return "ok", None, None, mode, elapsed
+        return "ok", None, None, mode, elapsed, None
 
     def text(key: str) -> str | None:
         v = info.get(key)
@@ -674,8 +795,24 @@ def _record(info: Mapping[str, Any] | None, mode: str, elapsed: float
 
     h = info.get("horizon")
     st = info.get("solve_time")
+    lv = info["level"] if "level" in info else (h if levels else None)
     return (text("status"), text("certificate"), None if h is None else int(h),
-            text("mode"), elapsed if st is None else float(st))
+            text("mode"), elapsed if st is None else float(st), None if lv is None else int(lv))
+
+
+def _bar_total(steps: int, stop_when: Any) -> int | None:
+    """The total of the progress bar: ``steps`` when the run ends only there, else None (a
+    run that stops early at ``stop_when`` is not an aborted one)."""
+    return steps if stop_when is None else None
+
+
+def _close_bar(bar: Any, done: int, reason: str) -> None:
+    """Close the progress bar; a run that ended normally (all steps or ``stop_when``) shows
+    ``done / done``, an interrupted or diverged one keeps its total."""
+    if reason in ("steps", "stop_when") and bar.total != done:
+        bar.total = done
+        bar.refresh()
+    bar.close()
 
 
 def _check_steps(steps: Any) -> int:

@@ -16,8 +16,8 @@ Examples
 >>> left[0].tolist(), right[0].tolist()
 ([[0.0, 2.0], [0.0, 2.0]], [[2.0, 4.0], [0.0, 2.0]])
 >>> P = cm.Paving(inner=left, boundary=right, domain=cm.Box([0, 0], [4, 2]))
->>> P.volume(), P.volume(view="inner")
-(8.0, 4.0)
+>>> P.volume(), P.volume(view="outer")
+(4.0, 8.0)
 >>> P.contains([[1.0, 1.0], [5.0, 1.0]])
 array([ True, False])
 >>> bool(P.contains_box(np.array([[[1.0, 3.0], [0.5, 1.5]]]))[0])
@@ -774,12 +774,14 @@ class Paving(SetBase):
     -----
     **Which set is represented.** A paving stands for the *outer approximation* of the
     target set, ``inner ∪ boundary``: the protocol members ``contains``, ``contains_box``,
-    ``intersects_box``, ``support``, ``bounding_box``, ``vertices`` and ``is_empty``, and
-    ``volume``, use it by default. Each of them takes ``view=`` to choose another union:
+    ``intersects_box``, ``support``, ``bounding_box``, ``vertices`` and ``is_empty`` use it
+    by default. The measures :meth:`volume` and :meth:`area` are the exception: by default
+    they count the proven part only (view ``"inner"``), never undecided boxes. Each of them
+    takes ``view=`` to choose another union:
 
-    ``"outer"`` (default)
+    ``"outer"`` (default, except for ``volume`` and ``area``)
         ``inner ∪ boundary``: every point of the target set in the domain is in it.
-    ``"inner"``
+    ``"inner"`` (default of ``volume`` and ``area``)
         ``inner``: every point of it is proven inside the target set.
     ``"boundary"``
         ``boundary`` only.
@@ -801,8 +803,8 @@ class Paving(SetBase):
     >>> import numpy as np
     >>> import casadi_cmpc as cm
     >>> P = cm.Paving(inner=cm.Box([0, 0], [1, 1]), boundary=[cm.Box([1, 0], [2, 1])])
-    >>> P.n_boxes, P.volume(), P.volume(view="inner")
-    (2, 2.0, 1.0)
+    >>> P.n_boxes, P.volume(), P.volume(view="outer")
+    (2, 1.0, 2.0)
     >>> P.contains([1.5, 0.5]), P.contains([1.5, 0.5], view="inner")
     (True, False)
     """
@@ -1095,16 +1097,21 @@ class Paving(SetBase):
         return pts
 
     # ------------------------------------------------------------- measures
-    def volume(self, view: str = "outer") -> float:
+    def volume(self, view: str = "inner") -> float:
         """Volume of the union of the boxes of a view (overlaps counted once).
 
         Parameters
         ----------
-        view : {"outer", "inner", "boundary", "outside"}
+        view : {"inner", "outer", "boundary", "outside"}
+            ``"inner"`` (default): the proven part only, a lower bound of the volume of the
+            target set in the domain; ``"outer"``: inner and undecided boxes, an upper bound
+            of it; ``"boundary"``: the undecided boxes; ``"outside"``: the boxes proven
+            outside.
 
         Returns
         -------
         float
+            In the units of the state product (e.g. an area in 2-D); 0.0 for an empty view.
         """
         v = str(view).lower()
         key = "volume:" + v
@@ -1112,8 +1119,8 @@ class Paving(SetBase):
             self._cache[key] = _union_volume(self.view_boxes(v))
         return self._cache[key]
 
-    def area(self, view: str = "outer") -> float:
-        """Area of a 2-D paving (alias of :meth:`volume`).
+    def area(self, view: str = "inner") -> float:
+        """Area of a 2-D paving (alias of :meth:`volume`; by default of the proven part).
 
         Raises
         ------
@@ -1192,7 +1199,7 @@ class Paving(SetBase):
         show_outer : bool
             Also draw the outside (discarded) boxes.
         legend : bool
-            Add a legend with one entry per drawn category.
+            Add a legend with one entry per drawn category, outside the axes (right).
         colors, labels : dict, optional
             Face colour and legend label per category ``"inner"``, ``"boundary"``,
             ``"outside"`` (the old key ``"outer"`` is a deprecated alias of ``"outside"``).
@@ -1206,7 +1213,7 @@ class Paving(SetBase):
             One collection per non-empty category drawn (outside, boundary, inner, in
             that order), one rectangle per box.
         """
-        from ..plot import new_axes, plot_boxes
+        from ..plot import legend_outside, new_axes, plot_boxes
 
         n = self._n
         if n >= 2:
@@ -1232,7 +1239,7 @@ class Paving(SetBase):
             style.setdefault("facecolor", col[name])
             plot_boxes(arr, ax=ax, dims=(0, 1), label=lab[name], **style)
         if legend and drawn:
-            ax.legend(loc="best")
+            legend_outside(ax)
         return ax
 
     # ---------------------------------------------------------- persistence

@@ -130,9 +130,16 @@ class Result:
         """``name=value`` items a subclass shows between ``status`` and ``nit``."""
         return []
 
+    def _repr_note(self) -> str | None:
+        """A short statement shown as ``verdict='...'`` right after the status, for the
+        cases in which the status alone would be misread (None: no note)."""
+        return None
+
     def __repr__(self) -> str:
-        parts = [f"status={self.status.name}", *self._repr_parts(), f"nit={self.nit}",
-                 f"n_boxes={self.n_boxes}", f"elapsed={self.elapsed:.3g}"]
+        note = self._repr_note()
+        parts = [f"status={self.status.name}", *([f"verdict={note!r}"] if note else []),
+                 *self._repr_parts(), f"nit={self.nit}", f"n_boxes={self.n_boxes}",
+                 f"elapsed={self.elapsed:.3g}"]
         return f"{type(self).__name__}({', '.join(parts)})"
 
 
@@ -212,7 +219,12 @@ class SetResult(Result):
         ``PROVED``: the search ran to completion (every box is decided or narrower than
         eps); ``BUDGET``: a limit (``max_boxes``, ``time_limit``) or an interruption
         stopped it, and the unexplored boxes are reported as boundary (still sound).
-        The proof is in the paving, whatever the status.
+        The proof is in the paving, whatever the status: a complete search that proved
+        no box inside is ``PROVED`` too, and its repr then says so (see ``verdict``).
+    verdict : str
+        What the paving proves, in words: how many boxes are proven inside, or that the set
+        is proven empty in the domain, or that no box is proven inside (undecided ones
+        remain). The repr shows it whenever no box is proven inside.
     nit, n_boxes : int
         Bisection levels and boxes classified (also available under their older names
         ``levels`` and ``n_classified``). Not to be confused with ``paving.n_boxes``, the
@@ -239,6 +251,9 @@ class SetResult(Result):
     (True, True, True)
     >>> res.n_inner == len(res.paving.inner) == len(res.inner)
     True
+    >>> far = cm.sivia(disk, cm.Box([5, 5], [6, 6]), cm.Box([0], [1]), eps=0.5)
+    >>> str(far.status), far.n_inner, far.verdict
+    ('PROVED', 0, 'proved: the set is empty in the domain (every box is proven outside)')
     """
 
     #: the attribute holding the set (see :class:`~casadi_cmpc.sets.base.HoldsSetMeta`)
@@ -318,6 +333,33 @@ class SetResult(Result):
 
     def __ror__(self, other: Any) -> Any:
         return other | self.paving
+
+    @property
+    def verdict(self) -> str:
+        """What the paving proves, in words (it does not depend on ``status`` alone).
+
+        * some inner box: ``"<k> boxes proven inside, <b> undecided"``;
+        * no inner and no boundary box: every box of the domain was proven outside, so
+          ``"proved: the set is empty in the domain"``;
+        * no inner box but undecided ones: ``"no box proven inside: <b> undecided boxes"``
+          (after a complete search they are narrower than eps; after a stopped one some
+          were not explored).
+        """
+        p = self.paving
+        n_in, n_bd = len(p.inner), len(p.boundary)
+        if n_in:
+            return (f"{n_in} box{'es' if n_in != 1 else ''} proven inside, {n_bd} "
+                    "undecided")
+        if not n_bd:
+            return "proved: the set is empty in the domain (every box is proven outside)"
+        why = ("narrower than eps" if self.status == Status.PROVED
+               else "the search was stopped")
+        return (f"no box proven inside: {n_bd} undecided box{'es' if n_bd != 1 else ''} "
+                f"({why})")
+
+    def _repr_note(self) -> str | None:
+        # a PROVED status with no inner box reads as a proven set: say what it is
+        return None if len(self.paving.inner) else self.verdict
 
     def _repr_parts(self) -> list[str]:
         p = self.paving

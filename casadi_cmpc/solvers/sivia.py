@@ -484,7 +484,7 @@ def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
     >>> p = ca.SX.sym("p", 2)
     >>> f = ca.Function("disk", [p], [p[0]**2 + p[1]**2])
     >>> P = cm.sivia(f, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.1)
-    >>> 2.5 < P.volume(view="inner") <= np.pi <= P.volume()
+    >>> 2.5 < P.volume(view="inner") <= np.pi <= P.volume(view="outer")
     True
 
     A closed loop as a Model (X0 = model.X):

@@ -379,7 +379,13 @@ def test_last_info_is_recorded():
     assert s["certificates"] == {"local_law": 2, "unverified": 2, "verified": 2}
     assert s["horizons"] == {"4": 2, "6": 2, "none": 2}
     assert s["statuses"] == {"PROVED": 2, "none": 2, "ok": 2}
-    assert s["solve_time"]["max"] == 0.5
+    # solve times over the two "mpc" steps only (0.5 s each); the others are not solves
+    assert traj.step_kind == ("local_law", "other", "solver") * 2
+    assert s["step_kinds"] == {"solver": 2, "local_law": 2, "other": 2}
+    assert s["solve_time"] == {"min": 0.5, "median": 0.5, "max": 0.5, "mean": 0.5,
+                               "total": 1.0, "steps": 2}
+    assert s["call_time"]["total"] == pytest.approx(float(traj.call_time.sum()))
+    assert traj.level == (None,) * 6 and s["levels"] == {}
 
 
 def test_plain_callable_defaults():
@@ -636,6 +642,18 @@ def test_save_load_round_trip(tmp_path, suffix):
     assert back.summary() == traj.summary()
     with pytest.raises(ValueError, match=r"\.json or \.npz"):
         traj.save(tmp_path / "traj.txt")
+
+
+def test_a_file_without_levels_loads_with_none_levels(tmp_path):
+    traj = cm.simulate(linear_model(), ReportingController(), [1.0, 0.0], 4)
+    path = traj.save(tmp_path / "t.json")
+    data = json.loads(path.read_text())
+    del data["level"]  # as written before levels were recorded
+    path.write_text(json.dumps(data))
+    back = cm.Trajectory.load(path)
+    assert back.level == (None,) * 4 and back.horizon == traj.horizon
+    with pytest.raises(DimensionError, match="level must have one entry per step"):
+        dataclasses.replace(traj, level=(1, 2))
 
 
 def test_summary_is_json_and_consistent():

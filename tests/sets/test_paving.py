@@ -248,9 +248,10 @@ def test_paving_construction_views_and_counts():
     assert P.domain == D and not P.is_empty()
     np.testing.assert_array_equal(P.boxes, np.concatenate([inner, boundary[0].as_array()[None]]))
     np.testing.assert_array_equal(P.view_boxes("outside"), outer)
-    assert P.volume() == 3.0 and P.volume("inner") == 2.0
+    # the default measure is the proven part; the outer approximation is asked for by name
+    assert P.volume() == 2.0 and P.volume("inner") == 2.0 and P.volume("outer") == 3.0
     assert P.volume("boundary") == 1.0 and P.volume("outside") == 2.0
-    assert P.area() == 3.0
+    assert P.area() == 2.0 and P.area("outer") == 3.0
     with pytest.raises(ValueError, match="Unknown view"):
         P.volume("all")
     with pytest.raises(ValueError):
@@ -258,7 +259,7 @@ def test_paving_construction_views_and_counts():
     I, O = P.inner_set(), P.outer_set()
     assert (I.n_inner, I.n_boundary, I.n_outside) == (2, 0, 0)
     assert (O.n_inner, O.n_boundary, O.n_outside) == (2, 1, 0)
-    assert I.volume() == 2.0 and O.volume() == 3.0
+    assert I.volume() == 2.0 and O.volume("outer") == 3.0 and O.volume() == 2.0
     assert P.contains([2.5, 0.5]) is True
     assert P.contains([2.5, 0.5], view="inner") is False
     assert I.contains([2.5, 0.5]) is False
@@ -296,10 +297,24 @@ def test_volume_of_regular_paving_adds_up_to_domain():
     dom_vol = 4.0 * 2.0 * 0.5
     assert P.volume("inner") + P.volume("boundary") + P.volume("outside") == pytest.approx(
         dom_vol, rel=1e-12)
-    assert P.volume() == pytest.approx(box_volume(P.boxes).sum(), rel=1e-12)
+    assert P.volume("outer") == pytest.approx(box_volume(P.boxes).sum(), rel=1e-12)
     everything = cm.Paving(boxes)
     assert everything.volume() == pytest.approx(dom_vol, rel=1e-12)
     assert everything.contains_box(D)[0]
+
+
+def test_volume_default_counts_proven_boxes_only():
+    """By hand: inner [0, 2] x [0, 1] (area 2) and [2, 3] x [0, 0.5] (0.5); undecided
+    [0, 3] x [1, 2] (3) and [3, 4] x [0, 2] (2), overlapping the inner box by nothing."""
+    P = cm.Paving(inner=[cm.Box([0, 0], [2, 1]), cm.Box([2, 0], [3, 0.5])],
+                  boundary=[cm.Box([0, 1], [3, 2]), cm.Box([3, 0], [4, 2])],
+                  outside=[cm.Box([2, 0.5], [3, 1])], domain=cm.Box([0, 0], [4, 2]))
+    assert P.volume() == P.area() == 2.5  # undecided boxes are not counted
+    assert P.volume(view="outer") == P.area("outer") == 7.5  # counted only when asked for
+    assert P.volume("boundary") == 5.0 and P.volume(view="outside") == 0.5
+    assert P.volume("INNER") == 2.5  # view names are not case-sensitive
+    # a paving with undecided boxes only has a proven volume of 0
+    assert cm.Paving(boundary=[cm.Box([0, 0], [1, 1])]).volume() == 0.0
 
 
 def test_volume_counts_overlaps_once():
@@ -465,7 +480,7 @@ def test_union_keeps_views_and_intersects_outside_boxes():
     assert (U.n_inner, U.n_boundary) == (2, 1)
     np.testing.assert_array_equal(U.outside, [[[2, 3], [0, 1]]])  # outside both
     assert U.n_discarded == 1 and U.domain == cm.Box([0, 0], [4, 1])
-    assert U.volume() == 3.0
+    assert U.volume() == 2.0 and U.volume("outer") == 3.0
     assert (A | cm.Box([5, 5], [6, 6])).domain is None
     assert (A | cm.Box([5, 5], [6, 6])).n_inner == 2
     with pytest.raises(cm.DimensionError):
