@@ -10,7 +10,10 @@ configured in ``example.info["mpc"]``. It simulates the closed loop from the the
 states, checks the constraints itself, and prints a summary. With ``--out DIR`` it writes the
 figures (PNG), ``summary.json`` and ``report.txt``.
 
-``cmpc list`` prints the example names.
+``cmpc list`` prints the examples (name, thesis example, dimensions, what the system is).
+``cmpc cache`` prints the directory of cached set sequences with its files and their sizes;
+``cmpc cache --clear`` deletes them. ``cmpc export EXAMPLE --out DIR [--build]`` writes the
+controller as C (with ``--build``, make and a C compiler are checked first).
 """
 
 from __future__ import annotations
@@ -56,26 +59,54 @@ def _obstacle_distances(traj: Any, run: dict) -> np.ndarray | None:
     return d.min(axis=1)
 
 
-# bumped when what a cached sequence holds changes (2: the proven law of T is stored)
-_SEQUENCE_FORMAT = "sequence-format-2"
+# bumped when what a cached sequence holds changes (2: the proven law of T is stored;
+# 3: compressed arrays, K_i stored as a reference to the step boxes, the law's key)
+_SEQUENCE_FORMAT = "sequence-format-3"
+
+# the names of the files `cmpc run` writes in the cache (and `cmpc cache --clear` removes)
+_CACHE_FILE = r"[A-Za-z0-9_]+-[0-9a-f]{16}\.npz"
+_PARTIAL_FILE = r"\.[A-Za-z0-9_]+-[0-9a-f]{16}\.[0-9]+\.partial\.npz"
+
+
+def _cache_dir(cache: str | None) -> Path:
+    """The directory of cached set sequences: ``cache`` when given, else
+    ``$XDG_CACHE_HOME/casadi_cmpc`` or ``~/.cache/casadi_cmpc``."""
+    import os
+
+    if cache:
+        return Path(cache)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "casadi_cmpc"
+
+
+def _law_key(ex: Any) -> str:
+    """A key of the example's local law: the hash of its expression in x (a gain, a law
+    object with its equilibrium and an SX expression alike)."""
+    from .control.invariance import law_identity
+
+    return law_identity(ex.model, ex.local_law)["law_key"]
 
 
 def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     """A file name that changes with the model, T, the law and the settings."""
     import hashlib
-    import os
 
     from . import __version__
 
     h = hashlib.sha256()
     for part in (ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
-                 np.asarray(ex.terminal.b).tobytes(), np.asarray(ex.local_law).tobytes(),
+                 np.asarray(ex.terminal.b).tobytes(), _law_key(ex),
                  repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
                  __version__, _SEQUENCE_FORMAT):
         h.update(part if isinstance(part, bytes) else str(part).encode())
-    base = Path(cache) if cache else Path(os.environ.get(
-        "XDG_CACHE_HOME", Path.home() / ".cache")) / "casadi_cmpc"
-    return base / f"{ex.name}-{h.hexdigest()[:16]}.npz"
+    return _cache_dir(cache) / f"{ex.name}-{h.hexdigest()[:16]}.npz"
+
+
+def _size(nbytes: int) -> str:
+    """``nbytes`` for a reader: ``"512 B"``, ``"1.5 kB"``, ``"892.5 MB"`` (powers of 1000)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes} B"
 
 
 # statuses of a sequence that answers its settings completely (cached and reused)
@@ -96,10 +127,29 @@ def _cache_mismatch(seq: Any, ex: Any, cfg: dict) -> str | None:
         return "it was computed with other settings"
     if info.get("terminal_certificate") != "proved":
         return "its terminal set is not proven invariant"
+    if info.get("terminal_law_key", _law_key(ex)) != _law_key(ex):
+        return "its terminal set was proven invariant under another local law"
     return None
 
 
-def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> Any:
+def _save_atomically(seq: Any, path: Path) -> None:
+    """Write ``seq`` to ``path`` through a partial file renamed when complete (an
+    interrupted write leaves no truncated cache file under the final name)."""
+    import os
+
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.partial.npz")
+    try:
+        seq.save(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
+                         solver: str | None = None) -> Any:
+    """The SetSequenceMPC of an example and its sequence, from the cache or computed (and
+    then cached); ``solver`` overrides the example's (default ipopt)."""
     from .control.controllable import controllable_sets
     from .control.linear_sets import SetSequence
     from .mpc.sequence import SetSequenceMPC
@@ -116,7 +166,8 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> A
                       "sequence again")
                 seq = None
             else:
-                print(f"sequence loaded from the cache {path}")
+                print(f"sequence loaded from the cache {path} "
+                      f"({_size(path.stat().st_size)})")
         except (ValueError, TypeError, KeyError, OSError) as exc:
             print(f"cache {path} unreadable ({exc}); computing the sequence again")
             seq = None
@@ -129,8 +180,9 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> A
         print(f"sequence computed in {time.perf_counter() - t0:.1f} s ({seq.status})")
         if seq.status in _COMPLETE:
             try:
-                seq.save(path)
-                print(f"  cached in {path}")
+                _save_atomically(seq, path)
+                print(f"  cached in {path} ({_size(path.stat().st_size)}; 'cmpc cache' lists "
+                      "the cache, 'cmpc cache --clear' empties it)")
             except OSError as exc:
                 print(f"  not cached ({exc})")
         else:
@@ -139,7 +191,7 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None) -> A
           f"law; sequence: {seq!r}, {len(seq) - 1} steps, eps = {seq.info.get('eps')}, "
           f"{seq.info.get('semantics')}")
     ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
-                          local_law=ex.local_law, solver=cfg.get("solver", "ipopt"),
+                          local_law=ex.local_law, solver=solver or cfg.get("solver", "ipopt"),
                           robust=cfg["robust"])
     return ctrl, seq
 
@@ -158,20 +210,20 @@ def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
 
 
 def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
+    """``sets.png``: the sets K_i coloured by step, T, X and the closed loops."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.0, 5.6))
-    seq.plot(ax=ax)
-    for i, traj in enumerate(trajs, start=1):
-        ax.plot(traj.x[:, 0], traj.x[:, 1], "o-", color="r" if i == 1 else f"C{i}", ms=3,
-                lw=1.2, label=f"closed loop from {np.round(traj.x[0], 3).tolist()}")
-    names = ex.info.get("state_names")
-    if names:
-        ax.set_xlabel(names[0])
-        ax.set_ylabel(names[1])
-    ax.legend(fontsize=8, loc="best")
-    ax.set_title(f"{ex.name}: controllable sets K_i and closed loops "
-                 f"({ex.info.get('example', '')})")
+    from .plot import plot_runs
+
+    fig, ax = plt.subplots(figsize=(8.0, 7.4), layout="constrained")
+    # runs first (drawn above the sets by their zorder), then the sets and one legend
+    plot_runs(trajs, ax=ax, model=ex.model, show_X=False, legend=False)
+    seq.plot(ax=ax, model=ex.model)
+    done = (f"K_{seq.converged_at} = K_{seq.converged_at - 1}: maximal set reached"
+            if seq.converged_at is not None else f"{len(seq) - 1} steps ({seq.status})")
+    ax.set_title(f"{ex.name} ({ex.info.get('example', '')}): controllable sets K_i and "
+                 f"closed loops\neps = {seq.info.get('eps')}, "
+                 f"{seq.info.get('semantics', '')}; {done}", fontsize="medium")
     path = out / "sets.png"
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -179,51 +231,56 @@ def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
 
 
 def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
+    """``phase_plane.png`` (all runs) and ``run<i>.png`` (one run with its signals)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plot import plot_trajectory
+    from .plot import legend_outside, plot_runs, plot_trajectory, variable_labels
 
-    names = ex.info.get("state_names") or ex.info.get("state_layout")
-    sets: dict[str, Any] = {}
-    if ex.terminal is not None:
-        sets["terminal set"] = ex.terminal
-    obstacles = None
+    model = ex.model
+    sets = {"T (terminal set)": ex.terminal} if ex.terminal is not None else None
+    obstacles, obstacle_label = None, "obstacle"
     if run.get("obstacles") is not None:
         obstacles = [(o[0], o[1], run["D"]) for o in np.asarray(run["obstacles"])]
+        unit = variable_labels(model, "x")[1][0]
+        obstacle_label = f"keep-out zone (radius D = {run['D']:g}{' ' + unit if unit else ''})"
+    # the reference of a run without terminal set (e.g. the target pose of MiroSot)
+    x_ref = ex.info.get("mpc", {}).get("x_ref")
+    target = np.asarray(x_ref, dtype=float) if ex.terminal is None and x_ref is not None \
+        else None
     written = []
-    fig, ax = plt.subplots(figsize=(6.4, 5.2))
-    for i, traj in enumerate(trajs, start=1):
-        before = set(ax.lines)
-        plot_trajectory(traj, ax=ax, sets=sets or None, obstacles=obstacles,
-                        state_names=names)
-        sets, obstacles = {}, None  # draw them once
-        for line in set(ax.lines) - before:
-            if line.get_label() == "trajectory":
-                line.set_label(f"run {i}" if len(trajs) > 1 else "trajectory")
-                line.set_color(f"C{i - 1}")
-    handles, labels = ax.get_legend_handles_labels()
-    keep = {lab: h for h, lab in zip(handles, labels, strict=True)}
-    ax.legend(list(keep.values()), list(keep.keys()), fontsize=8, loc="best")
+    fig, ax = plt.subplots(figsize=(8.0, 5.6), layout="constrained")
+    if model.n >= 2:
+        plot_runs(trajs, ax=ax, sets=sets, obstacles=obstacles, obstacle_label=obstacle_label,
+                  model=model, legend=False)
+        if target is not None:
+            ax.plot(target[0], target[1], "*", ms=16, color="gold", mec="k", zorder=5,
+                    label="target x_ref")
+        legend_outside(ax)
+    else:
+        for traj in trajs:
+            plot_trajectory(traj, ax=ax, sets=sets)
     ax.set_title(f"{ex.name}: closed loop ({ex.info.get('example', '')})")
     path = out / "phase_plane.png"
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     written.append(path.name)
     for i, traj in enumerate(trajs, start=1):
+        levels = getattr(traj, "level", ())
+        hs = {h for h in traj.horizon if h is not None}
+        horizon = "auto" if any(v is not None for v in levels) else (
+            "horizon" if len(hs) > 1 else None)
         fig = plot_trajectory(
-            traj, sets={"terminal set": ex.terminal} if ex.terminal is not None else None,
-            obstacles=[(o[0], o[1], run["D"]) for o in np.asarray(run["obstacles"])]
-            if run.get("obstacles") is not None else None,
-            state_names=names,
+            traj, sets=sets, obstacles=obstacles, obstacle_label=obstacle_label,
+            states=ex.info.get("plot_states"), horizon=horizon,
             title=f"{ex.name}: run {i} from x0 = {np.round(traj.x[0], 4).tolist()}")
-        for a in fig.axes:
-            handles, labels = a.get_legend_handles_labels()
-            if a.get_legend() is not None and len(set(labels)) < len(labels):
-                keep = {lab: h for h, lab in zip(handles, labels, strict=True)}
-                a.legend(list(keep.values()), list(keep.keys()), fontsize=8)
+        if target is not None:
+            pa = fig.axes[0]
+            pa.plot(target[0], target[1], "*", ms=16, color="gold", mec="k", zorder=5,
+                    label="target x_ref")
+            legend_outside(pa, where="below", ncol=2)  # as plot_trajectory places it
         path = out / f"run{i}.png"
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
@@ -234,7 +291,7 @@ def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
 def _run(name: str, out: str | None, steps: int | None, seed: int,
          progress: bool | None, controller: str = "auto", cache: str | None = None) -> int:
     from . import models
-    from .mpc.simulate import simulate
+    from .mpc.simulate import _summary_lines, simulate
 
     try:
         ex = models.load(name)
@@ -263,6 +320,9 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
     if seq is not None:
         run["note"] = ex.info["sequence"].get("note", run.get("note", ""))
     print(f"\ncontroller: {ctrl!r}")
+    guarantee = getattr(ctrl, "guarantee", None)
+    if guarantee:
+        print(f"  guarantee: {guarantee}")
     if run.get("note"):
         print(f"  {run['note']}")
     n_steps = int(steps if steps is not None else run.get("steps", 50))
@@ -276,23 +336,31 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
               + (f", disturbance {disturbance}" if disturbance else ""))
         traj = simulate(model, ctrl, x0, n_steps, disturbance=disturbance, seed=seed + i - 1,
                         progress=progress)
+        if traj.interrupted:  # Ctrl-C: the run ends (exit code 130), nothing is written
+            raise KeyboardInterrupt
         trajs.append(traj)
         s = traj.summary()
         dist = float(np.abs(ctrl.contract @ (traj.x[-1] - x_ref)).max())
         certs = s.get("certificates", {})
+        # a set-sequence controller reports levels, not horizons: each under its own name
         info = {"x0": x0, "final_state": traj.x[-1], "final_distance_to_reference": dist,
                 "steps": traj.steps, "stop_reason": traj.stop_reason,
                 "violations": {"state": int(traj.violations["state"]),
                                "input": int(traj.violations["input"])},
-                "certificates": certs, "horizon_per_step": list(traj.horizon),
-                "solve_time": s.get("solve_time"), "disturbance": traj.disturbance}
+                "certificates": certs,
+                "horizon_per_step": [h if lv is None else None
+                                     for h, lv in zip(traj.horizon, traj.level, strict=True)],
+                "horizons": s["horizons"], "levels": s["levels"],
+                "step_kinds": s["step_kinds"], "modes": s["modes"],
+                "solve_time": s["solve_time"],
+                "call_time": s["call_time"], "disturbance": traj.disturbance}
+        if s["levels"]:
+            info["level_per_step"] = list(traj.level)
         dmin = _obstacle_distances(traj, run)
         if dmin is not None:
             info["min_obstacle_distance"] = float(dmin.min())
             info["obstacle_violations"] = int((dmin < run["D"]).sum())
         runs.append(info)
-        st = s.get("solve_time") or {}
-        med = st.get("median")
         print(f"  final state {np.round(traj.x[-1], 6).tolist()} "
               f"(|C (x - x_ref)|_inf = {dist:.3g})")
         print(f"  certificates: {certs}")
@@ -301,13 +369,14 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
               + (f", obstacle {info['obstacle_violations']} (min distance "
                  f"{info['min_obstacle_distance']:.3g}, D = {run['D']})" if dmin is not None
                  else ""))
-        if med is not None:
-            print(f"  solve time per step: median {med * 1e3:.3g} ms, max "
-                  f"{st.get('max', 0) * 1e3:.3g} ms")
+        for line in _summary_lines(s):
+            print(f"  {line}")
     total_viol = sum(r["violations"]["state"] + r["violations"]["input"]
                      + r.get("obstacle_violations", 0) for r in runs)
     summary = {"example": name, "thesis_example": ex.info.get("example"),
-               "controller": repr(ctrl), "note": run.get("note", ""),
+               "controller": repr(ctrl), "guarantee": guarantee,
+               "robust": bool(getattr(ctrl, "robust", False)) and model.l > 0,
+               "note": run.get("note", ""),
                "controller_build_time": t_build, "steps": n_steps, "seed": seed,
                "runs": runs, "total_violations": total_viol}
     if seq is not None:
@@ -334,11 +403,20 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
 
 
 def _report(ex: Any, ctrl: Any, summary: dict) -> str:
+    """The text of ``report.txt``: the runs, and what their certificates prove, stated
+    from the controller itself (robust or nominal, its disturbance set, its sequence)."""
+    from .mpc.simulate import _summary_lines
+
+    model = ex.model
     lines = [f"cmpc run {ex.name} ({ex.info.get('example', '')}, thesis §"
-             f"{ex.info.get('section', '')})", "", ex.model.summary(), "",
+             f"{ex.info.get('section', '')})", "", model.summary(), "",
              f"controller: {summary['controller']}"]
+    guarantee = getattr(ctrl, "guarantee", None)
+    if guarantee:
+        lines.append(f"  guarantee: {guarantee}")
     if summary["note"]:
         lines.append(f"  {summary['note']}")
+    labels: list[str] = []
     for i, r in enumerate(summary["runs"], start=1):
         lines += ["", f"run {i}: x0 = {np.asarray(r['x0']).tolist()}, {r['steps']} steps "
                       f"({r['stop_reason']}), disturbance {r['disturbance']}",
@@ -347,23 +425,58 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
                   "contracted components)",
                   f"  certificates per step: {r['certificates']}",
                   f"  violations counted by the simulator: {r['violations']}"]
+        labels += [c for c in r["certificates"] if c not in labels]
         if "min_obstacle_distance" in r:
             lines.append(f"  smallest obstacle distance {r['min_obstacle_distance']:.4g} "
                          f"(required >= {ex.info['run']['D']})")
-        hs = [h for h in r["horizon_per_step"] if h is not None]
-        if hs:
-            vals, cnt = np.unique(hs, return_counts=True)
-            lines.append("  horizons used: " + ", ".join(
-                f"N = {v}: {c} steps" for v, c in zip(vals, cnt, strict=True)))
-        st = r.get("solve_time") or {}
-        if st.get("median") is not None:
-            lines.append(f"  solve time: median {st['median'] * 1e3:.3g} ms, max "
-                         f"{st['max'] * 1e3:.3g} ms")
-    lines += ["", "'verified': the applied sequence was re-evaluated in interval arithmetic "
-              "from the exact state and satisfies X, U, the contraction and the extra "
-              "constraints (for the nominal disturbance when the model has one); "
-              "'local_law': the state was inside the local set and the local law was applied; "
-              "other labels claim nothing.", ""]
+        lines += [f"  {line}" for line in _summary_lines(r)]
+
+    # ------------------------------------------- what the certificates prove
+    seq = getattr(ctrl, "seq", None)
+    sinfo = summary.get("sequence") or {}
+    robust = bool(getattr(ctrl, "robust", False)) and model.l > 0
+    if not model.l:
+        w_claim, w_line = "", "the model has no disturbance."
+    elif robust:
+        W = f"[{model.W.lo.tolist()}, {model.W.hi.tolist()}]"
+        w_claim = f", for all w in W = {W}"
+        w_line = f"robust controller: its certificates hold for all w in W = {W}."
+    else:
+        w_nom = getattr(ctrl, "w_nominal", None)
+        w_nom = np.asarray(model.W.mid if w_nom is None else w_nom, dtype=float).tolist()
+        w_claim = f", for the nominal w = {w_nom} only"
+        w_line = (f"nominal controller: its certificates hold for the nominal disturbance "
+                  f"w = {w_nom} only; the other w of W = [{model.W.lo.tolist()}, "
+                  f"{model.W.hi.tolist()}] are not covered.")
+    notes = ["What the certificates prove:", f"  disturbance: {w_line}"]
+    if sinfo:
+        notes.append(f"  sets K_i of the sequence: every state of K_i is proven to reach "
+                     f"K_(i-1) in one step ({sinfo.get('semantics')}); K_0 = T is "
+                     f"{sinfo.get('terminal_certificate')} invariant under the local law.")
+    for label in labels:
+        if label == "verified" and seq is not None:
+            text = ("the applied control was re-evaluated in interval arithmetic from the "
+                    f"exact state x(k): f(x(k), u(k){', w' if model.l else ''}) lies in "
+                    "K_(i-1), one level down" + w_claim)
+        elif label == "verified":
+            text = ("the applied sequence was re-evaluated in interval arithmetic from the "
+                    "exact state and satisfies X, U, the contraction and the extra "
+                    "constraints" + w_claim)
+        elif label == "local_law" and seq is not None:
+            claim = seq.info.get("terminal_claim") if hasattr(seq, "info") else None
+            text = ("x(k) was in T = K_0 and the local law was applied; "
+                    + (f"T is proven invariant under it: {claim}"
+                       if sinfo.get("terminal_certificate") == "proved" and claim
+                       else "the invariance of T under it is not proven"))
+        elif label == "local_law":
+            text = ("x(k) was proven inside the local set and the local law was applied; "
+                    "nothing more is claimed for the step")
+        elif label == "at_reference":
+            text = "x(k) was the reference and u_ref was applied; nothing more is claimed"
+        else:
+            text = "nothing is claimed for these steps"
+        notes.append(f"  '{label}': {text}.")
+    lines += ["", *notes, ""]
     return "\n".join(lines)
 
 
@@ -371,33 +484,42 @@ def export_controller(ex: Any, controller: str = "auto", cache: Any = None,
                       progress: bool | None = None) -> Any:
     """The controller ``cmpc export`` writes for an example (solver ``"sqp"``): the
     example's SetSequenceMPC (sets from the cache) or its ContractiveMPC at a fixed horizon
-    (``horizon_max`` when the example searches the horizon). Raises ValueError for the LP
-    form, which has no C export."""
+    (``horizon_max`` when the example searches the horizon) in receding mode. Raises
+    ValueError for the LP form, which has no C export."""
     from .mpc.contractive import ContractiveMPC
-    from .mpc.sequence import SetSequenceMPC
 
-    ctrl, seq = _controller(ex, controller, cache, progress)
-    if isinstance(ctrl, SetSequenceMPC):
-        cfg = ex.info["sequence"]
-        return SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
-                              local_law=ex.local_law, solver="sqp", robust=cfg["robust"])
+    if controller == "sequence" and "sequence" not in ex.info:
+        raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
+                         "--controller contractive")
+    if controller in ("auto", "sequence") and "sequence" in ex.info:
+        return _sequence_controller(ex, cache, progress, solver="sqp")[0]
     kw = dict(ex.info["mpc"])
     if kw.get("solver") == "lp":
         raise ValueError(f"example '{ex.name}' uses the LP form of the contractive MPC "
                          "(solver='lp'), which has no C export; the sqp and ipopt forms "
                          "have one")
     kw["solver"] = "sqp"
+    kw["mode"] = "receding"  # the C controller solves at every step
     if kw.get("horizon") is None:
         kw["horizon"] = kw.get("horizon_max", 10)
     return ContractiveMPC(ex.model, **kw)
 
 
 def _export(args: Any) -> int:
-    """``cmpc export``: the example's controller (solver sqp) written as C."""
+    """``cmpc export``: the example's controller (solver sqp) written as C; with
+    ``--build`` the tools are checked before anything is computed."""
     from . import models
-    from .codegen import build, export_c
-    from .codegen.export import ExportError
+    from .codegen import export_c
+    from .codegen.export import ExportError, build, check_build_tools
 
+    compiler = None
+    if args.build:
+        try:
+            compiler = check_build_tools()
+        except ExportError as exc:
+            print(f"cmpc export: cannot --build: {exc}. Nothing was computed; without "
+                  "--build the C sources are written all the same", file=sys.stderr)
+            return 2
     try:
         ex = models.load(args.example)
     except (KeyError, ValueError) as exc:
@@ -427,7 +549,7 @@ def _export(args: Any) -> int:
         print("tables: " + ", ".join(f"{k} {v}" for k, v in info.tables.items()))
     if args.build:
         try:
-            build(out)
+            build(out, cc=compiler)
         except ExportError as exc:
             print(f"cmpc export: {exc}", file=sys.stderr)
             return 1
@@ -438,7 +560,77 @@ def _export(args: Any) -> int:
                   file=sys.stderr)
             return 1
     else:
-        print(f"build with: make -C {out} && {out / 'example'}")
+        print(f"build with: make -C {out} && {out / 'example'}  (needs make and a C "
+              "compiler: $(CC), by default cc)")
+    return 0
+
+
+def _example_line(name: str) -> str:
+    """One line of ``cmpc list``: name, thesis example, dimensions, what the system is."""
+    from . import models
+
+    ex = models.load(name)
+    info = ex.info
+    n, m, nw = ex.model.n, ex.model.m, ex.model.l
+    dims = f"{n} state{'s' * (n != 1)}, {m} input{'s' * (m != 1)}"
+    if nw:
+        dims += f", {nw} disturbance{'s' * (nw != 1)}"
+    desc = info.get("description") or _module_summary(name) or (
+        f"thesis {info['equation']}" if info.get("equation") else "")
+    section = str(info.get("section", "") or "")
+    if section:
+        desc += " (" + ", ".join("§" + p.strip().lstrip("§")
+                                 for p in section.split(",") if p.strip()) + ")"
+    if "sequence" in info:
+        desc += "; controllable sets"
+    return f"{name:22s} {str(info.get('example', '')):8s} {dims:34s} {desc}".rstrip()
+
+
+def _module_summary(name: str) -> str:
+    """What an example is, from the first line of its module's docstring without the
+    example number and the thesis reference ("E8 — Cannon et al. (2003) system with dt =
+    0.1, mu = 0.9 (thesis §4.4.4, (4.28))." gives "Cannon et al. (2003) system with dt =
+    0.1, mu = 0.9"); "" when there is none."""
+    import importlib
+
+    from . import models
+
+    try:
+        doc = importlib.import_module(f"{models.__name__}.{name}").__doc__ or ""
+    except ImportError:
+        return ""
+    line = doc.strip().splitlines()[0].strip() if doc.strip() else ""
+    if " — " in line:
+        line = line.split(" — ", 1)[1]
+    if " (thesis" in line:
+        line = line[:line.index(" (thesis")]
+    return line.rstrip(" .")
+
+
+def _cache_command(cache: str | None, clear: bool) -> int:
+    """``cmpc cache``: the cache directory and its files with their sizes;
+    ``--clear`` deletes the files ``cmpc run`` wrote there (nothing else)."""
+    import re
+
+    d = _cache_dir(cache)
+    print(f"cache directory: {d}")
+    if not d.is_dir():
+        print("  (does not exist: nothing cached)")
+        return 0
+    ours = re.compile(f"(?:{_CACHE_FILE})|(?:{_PARTIAL_FILE})")
+    files = sorted(f for f in d.iterdir() if f.is_file() and ours.fullmatch(f.name))
+    others = sorted(f.name for f in d.iterdir() if f not in files)
+    total = 0
+    for f in files:
+        size = f.stat().st_size
+        total += size
+        print(f"  {f.name:44s} {_size(size):>10s}")
+        if clear:
+            f.unlink()
+    what = f"{len(files)} cached sequence file{'s' * (len(files) != 1)}, {_size(total)}"
+    print(f"removed {what}" if clear else what)
+    if others:
+        print(f"  not written by cmpc (left alone): {', '.join(others)}")
     return 0
 
 
@@ -472,10 +664,17 @@ def main(argv: list[str] | None = None) -> int:
     p_exp.add_argument("--overwrite", action="store_true",
                        help="replace the contents of a non-empty --out directory")
     p_exp.add_argument("--build", action="store_true",
-                       help="run make afterwards and the example program (needs gcc)")
+                       help="run make afterwards and the example program (needs make and a "
+                            "C compiler, $CC or cc; checked before anything is computed)")
     p_exp.add_argument("--cache", default=None, help="as for 'cmpc run'")
     p_exp.add_argument("--no-progress", action="store_true", help="no progress bar")
-    sub.add_parser("list", help="list the example names")
+    sub.add_parser("list", help="list the examples: name, thesis example, dimensions, what "
+                                "the system is")
+    p_cache = sub.add_parser("cache", help="show the cache of set sequences (directory, "
+                                           "files, sizes)")
+    p_cache.add_argument("--cache", default=None, help="as for 'cmpc run'")
+    p_cache.add_argument("--clear", action="store_true",
+                         help="delete the cached sequences")
     args = parser.parse_args(argv)
     try:
         return _command(parser, args)
@@ -488,12 +687,13 @@ def _command(parser: Any, args: Any) -> int:
     """Run the parsed command."""
     if args.command == "export":
         return _export(args)
+    if args.command == "cache":
+        return _cache_command(args.cache, args.clear)
     if args.command == "list":
         from . import models
 
         for n in models.names():
-            ex_doc = models.load(n).info.get("example", "")
-            print(f"{n:24s} {ex_doc}")
+            print(_example_line(n))
         return 0
     if args.steps is not None and args.steps < 1:
         parser.error("--steps must be at least 1")

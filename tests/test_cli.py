@@ -1,11 +1,11 @@
 import json
-import shutil
 
 import numpy as np
 import pytest
 
 import casadi_cmpc as cm
 from casadi_cmpc.cli import main
+from casadi_cmpc.codegen.export import can_build
 
 # closed-loop steps per example in the suite (the examples' own counts run in CI of the
 # notebooks' full mode and by hand)
@@ -15,10 +15,16 @@ STEPS = {"mirosot": 4, "cannon_001": 4}
 SEQUENCE_EXAMPLES = [n for n in cm.models.names() if "sequence" in cm.models.load(n).info]
 
 
+
+
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """One cache of set sequences for the module (each sequence is computed once)."""
-    return str(tmp_path_factory.mktemp("cmpc_cache"))
+    """The cache of set sequences shared by the CLI and export tests of the session (the
+    session's base temporary directory): each sequence is computed once, by the first test
+    that needs it, and loaded from the cache by the others."""
+    d = tmp_path_factory.getbasetemp() / "cmpc_sequences"
+    d.mkdir(exist_ok=True)
+    return str(d)
 
 
 def test_the_set_pipeline_covers_e8_e9_e10_e14():
@@ -110,10 +116,26 @@ def test_bad_steps_is_refused():
         main(["run", "grimm", "--steps", "0"])
 
 
-def test_list_names_every_example(capsys):
+def test_list_says_what_every_example_is(capsys):
+    """One line per example: name, thesis example, dimensions, a description with the
+    thesis section, and whether it has controllable sets."""
     assert main(["list"]) == 0
-    names = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    lines = capsys.readouterr().out.splitlines()
+    names = [line.split()[0] for line in lines]
     assert names == cm.models.names() and len(names) == 10
+    for name, line in zip(names, lines, strict=True):
+        ex = cm.models.load(name)
+        n, m, nw = ex.model.n, ex.model.m, ex.model.l
+        assert f" {ex.info['example']} " in line
+        assert f"{n} states, {m} input{'s' * (m > 1)}" in line
+        assert (f"{nw} disturbance" in line) == (nw > 0)
+        assert "§" + ex.info["section"].split(",")[0] in line
+        assert line.endswith("; controllable sets") == (name in SEQUENCE_EXAMPLES)
+    by_name = dict(zip(names, lines, strict=True))
+    assert "continuous stirred-tank reactor" in by_name["cstr"]
+    assert "E6, E14" in by_name["cstr"]
+    assert "mu in [0.85, 0.95]" in by_name["cannon_robust"]
+    assert "8 states, 2 inputs" in by_name["mirosot"] and "obstacle" in by_name["mirosot"]
 
 
 def test_missing_command_is_an_error():
@@ -147,7 +169,7 @@ def test_export_every_listed_example(name, tmp_path, capsys, cache):
     kind = "set_sequence" if name in SEQUENCE_EXAMPLES else "contractive"
     assert f'#define CMPC_KIND "{kind}"' in hdr
     assert "int cmpc_step(const double *x, double *u);" in hdr
-    if shutil.which("gcc") is None or shutil.which("make") is None:
+    if not can_build():
         return
     # built and loaded, it drives the example's closed loop like the Python controller
     from casadi_cmpc.cli import export_controller
@@ -170,7 +192,7 @@ def test_export_every_listed_example(name, tmp_path, capsys, cache):
         x, xc = ex.model.step(x, r.u, w), C.model(xc, u, w)
 
 
-@pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="needs gcc")
+@pytest.mark.skipif(not can_build(), reason="needs make and a C compiler")
 def test_export_build_runs_the_example_program(tmp_path, capsys, cache):
     out = tmp_path / "c"
     assert main(["export", "cstr", "--out", str(out), "--cache", cache, "--build",
@@ -181,3 +203,61 @@ def test_export_build_runs_the_example_program(tmp_path, capsys, cache):
     # a non-empty directory is refused without --overwrite
     assert main(["export", "cstr", "--out", str(out), "--cache", cache]) == 2
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_export_build_without_make_is_refused_before_computing(tmp_path, monkeypatch,
+                                                               capsys):
+    """``--build`` on a machine without make (or without a C compiler) stops at once with
+    exit code 2 and names what is missing: no example is loaded, no controller built,
+    nothing written."""
+    from casadi_cmpc import cli
+
+    calls = []
+
+    def record(what):
+        def f(*a, **k):
+            calls.append(what)
+            raise AssertionError(f"{what} called")
+        return f
+
+    monkeypatch.setattr(cli, "export_controller", record("export_controller"))
+    monkeypatch.setattr(cli, "_controller", record("_controller"))
+    monkeypatch.setattr(cm.models, "load", record("models.load"))
+    monkeypatch.delenv("CC", raising=False)
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))  # neither make nor a compiler
+    out = tmp_path / "c"
+    assert main(["export", "cstr", "--out", str(out), "--build", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "'make'" in err and "C compiler" in err and "Nothing was computed" in err
+    # make alone: the compiler is named
+    (empty / "make").write_text("#!/bin/sh\nexit 0\n")
+    (empty / "make").chmod(0o755)
+    assert main(["export", "cstr", "--out", str(out), "--build", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "'make'" not in err and "a C compiler ('cc', 'gcc' or 'clang')" in err
+    assert calls == [] and not out.exists()
+
+
+def test_the_cache_files_are_small(cache):
+    """The cached sequences store every box once (compressed): at most 48 bytes per box
+    (its bounds and its control take 40 uncompressed) plus 64 kB, where copying the
+    boxes into every K_i made E14's file 892 MB for 68 658 boxes."""
+    from casadi_cmpc.cli import _cache_path
+    from casadi_cmpc.control.linear_sets import SetSequence
+
+    checked = 0
+    for name in SEQUENCE_EXAMPLES:
+        ex = cm.models.load(name)
+        path = _cache_path(ex, ex.info["sequence"], cache)
+        if not path.is_file() and name == "cannon":  # E8 at least (a few seconds)
+            assert main(["run", name, "--steps", "1", "--no-progress", "--cache", cache]) == 0
+        if not path.is_file():  # not computed in this session
+            continue
+        seq = SetSequence.load(path)
+        n_boxes = sum(st["boxes"].shape[0] for st in seq.steps)
+        assert n_boxes > 0
+        assert path.stat().st_size <= 48 * n_boxes + 64_000, (name, path.stat().st_size)
+        checked += 1
+    assert checked >= 1

@@ -16,3 +16,20 @@ def test_all_subpackages_are_packaged():
              for p in pkg.rglob("__init__.py")}
     assert found <= listed, f"not packaged: {sorted(found - listed)}"
     assert "casadi_cmpc.models" in listed
+
+
+# distributions on PyPI as source archives only (their install compiles C): none may be in
+# the default dependencies or the test extra, which must install with python3 and pip alone
+_NEEDS_A_COMPILER = ("pycddlib",)
+
+
+def test_the_test_extra_needs_no_compiler():
+    import pytest
+
+    tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    reqs = list(meta["dependencies"]) + list(meta["optional-dependencies"]["test"])
+    bad = [r for r in reqs if r.lower().startswith(_NEEDS_A_COMPILER)]
+    assert not bad, f"needs a C compiler to install: {bad}"
+    assert any(r.startswith("pycddlib") for r in meta["optional-dependencies"]["cdd"])

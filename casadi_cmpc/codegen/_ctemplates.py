@@ -706,10 +706,11 @@ int main(int argc, char **argv) {{
 
 def makefile(solver: str, inc: str, lib: str) -> str:
     ipopt = solver == "ipopt"
-    return f"""# Builds the exported controller with plain gcc (C99).
+    return f"""# Builds the exported controller with the C compiler $(CC) (C99): by default cc,
+# make's built-in value; another one with e.g. `make CC=gcc` or `make CC=clang`.
 #   make            libcmpc.so and the example program
 #   ./example [N]   closed loop of N steps on the generated model
-CC ?= gcc
+CC ?= cc
 CFLAGS ?= -std=c99 -Wall -Wextra -Werror -O2
 SOFLAGS = -shared -fPIC
 {'IPOPT_CFLAGS = ' + inc if ipopt else '# standalone: no external library'}
@@ -736,7 +737,8 @@ def readme(kind: str, solver: str, model: Any) -> str:
     return f"""Controller exported from casadi_cmpc ({kind}, solver {solver})
 for model '{model.name}'.
 
-  make          builds libcmpc.so and ./example (gcc, -std=c99 -Wall -Wextra -Werror -O2)
+  make          builds libcmpc.so and ./example with $(CC) (default cc; make CC=gcc
+                picks another compiler), -std=c99 -Wall -Wextra -Werror -O2
   ./example 40  runs 40 closed-loop steps on the generated model and prints them
 
 API: see cmpc_controller.h (int cmpc_step(const double *x, double *u)).

@@ -7,7 +7,8 @@ The generated directory holds
 * ``cmpc_tables.h``: the set tables as static arrays;
 * ``cmpc_controller.h/.c``: the API (``cmpc_step``) and the controller logic;
 * ``example.c``: a closed loop on the generated model, printed step by step;
-* ``Makefile``: ``make`` builds ``libcmpc.so`` and ``example`` with plain gcc.
+* ``Makefile``: ``make`` builds ``libcmpc.so`` and ``example`` with ``$(CC)`` (make's
+  default ``cc``; ``make CC=gcc`` picks another compiler).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ import numpy as np
 
 from . import _ctemplates as T
 
-__all__ = ["export_c", "build", "load", "CompiledController", "ExportInfo"]
+__all__ = ["export_c", "build", "check_build_tools", "load", "CompiledController",
+           "ExportInfo"]
 
 #: Return codes and flags of ``cmpc_step`` (kept equal to the macros of the header).
 NOT_CONTROLLABLE = -1
@@ -508,7 +510,10 @@ class _ContractiveExport:
             raise ExportError("a polytope gauge contraction is an LP form (solver='lp'), "
                               "which has no C export")
         if ctrl.mode != "receding":
-            raise ExportError("export supports mode='receding' only")
+            raise ExportError(
+                "export supports mode='receding' only: the C controller solves at every "
+                "step and applies the first move (see ContractiveMPC.guarantee for what that "
+                "promises); build the controller with mode='receding' to export it")
         self.N = ctrl.horizon
         self.h = ctrl._get(self.N)
         S = ctrl.local_set if ctrl._law is not None else None
@@ -597,23 +602,86 @@ def _norm_code(norm: float) -> int:
 
 
 # ----------------------------------------------------------------------------- build/load
-def build(directory: Any, target: str = "all", cc: str | None = None) -> Path:
-    """Run ``make`` in an exported directory; the path of ``libcmpc.so``.
+def can_build() -> bool:
+    """Whether :func:`check_build_tools` finds make and a C compiler (no exception)."""
+    try:
+        check_build_tools()
+    except ExportError:
+        return False
+    return True
+
+
+def check_build_tools(cc: str | None = None) -> str:
+    """Check that ``make`` and a C compiler are installed, before anything is built.
+
+    Parameters
+    ----------
+    cc : str, optional
+        The compiler to use. Default: the environment's ``CC``, else ``cc`` (what the
+        generated Makefile's ``$(CC)`` is under make), else ``gcc`` or ``clang``.
+
+    Returns
+    -------
+    str
+        The compiler command (pass it on as ``make CC=...``).
 
     Raises
     ------
     ExportError
-        ``make`` or the compiler is missing, or the build fails (its output is shown).
+        ``make`` or the compiler is not on ``PATH``; the message names every missing tool.
+    """
+    import os
+    import shlex
+
+    missing = []
+    if shutil.which("make") is None:
+        missing.append("'make'")
+    wanted = cc or os.environ.get("CC") or None
+    if wanted:
+        words = shlex.split(wanted)
+        found = wanted if words and shutil.which(words[0]) else None
+        if found is None:
+            missing.append(f"the C compiler {wanted!r} (from {'cc=' if cc else '$CC'})")
+    else:
+        found = next((c for c in ("cc", "gcc", "clang") if shutil.which(c)), None)
+        if found is None:
+            missing.append("a C compiler ('cc', 'gcc' or 'clang')")
+    if missing:
+        raise ExportError(
+            f"{' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} not installed "
+            "(not on PATH): building an exported controller needs make and a C compiler "
+            "(the Makefile calls $(CC), by default cc; e.g. apt-get install make gcc)")
+    return str(found)
+
+
+def build(directory: Any, target: str = "all", cc: str | None = None) -> Path:
+    """Run ``make`` in an exported directory; the path of ``libcmpc.so``.
+
+    Parameters
+    ----------
+    directory : str or Path
+        A directory written by :func:`export_c`.
+    target : str
+        The make target (``"all"``, ``"libcmpc.so"``, ``"example"``).
+    cc : str, optional
+        The C compiler (see :func:`check_build_tools`).
+
+    Returns
+    -------
+    Path
+        ``directory / "libcmpc.so"``.
+
+    Raises
+    ------
+    ExportError
+        ``make`` or the compiler is missing (checked first), or the build fails (its
+        output is shown).
     """
     d = Path(directory)
     if not (d / "Makefile").exists():
         raise ExportError(f"{d} holds no exported controller (no Makefile)")
-    if shutil.which("make") is None:
-        raise ExportError("'make' is not installed: building the export needs make and a C "
-                          "compiler (e.g. gcc)")
-    cmd = ["make", "-C", str(d), target]
-    if cc is not None:
-        cmd.append(f"CC={cc}")
+    compiler = check_build_tools(cc)
+    cmd = ["make", "-C", str(d), target, f"CC={compiler}"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
         raise ExportError(f"building {d} failed:\n{res.stdout}\n{res.stderr}")

@@ -10,22 +10,28 @@ import numpy as np
 import pytest
 
 import casadi_cmpc as cm
-from casadi_cmpc.codegen import export_c, load
-from casadi_cmpc.codegen.export import ExportError
+from casadi_cmpc.codegen import build, export_c, load
+from casadi_cmpc.codegen.export import ExportError, can_build, check_build_tools
 from casadi_cmpc.mpc.sequence import SetSequenceMPC
 
-needs_cc = pytest.mark.skipif(shutil.which("gcc") is None or shutil.which("make") is None,
-                              reason="building the export needs gcc and make")
+needs_cc = pytest.mark.skipif(not can_build(),
+                              reason="building the export needs make and a C compiler")
 
 
 @pytest.fixture(scope="module")
 def e9(tmp_path_factory):
+    """E9's robust one-step controller (solver sqp) exported; its sequence (the example's
+    settings) comes from the session's cache of set sequences, shared with the CLI tests
+    (computed by whichever module needs it first)."""
+    from casadi_cmpc.cli import export_controller
+
     ex = cm.models.load("cannon_robust")
-    cfg = ex.info["sequence"]
-    seq = cm.controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=True,
-                               law=ex.local_law, progress=False)
-    ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
-                          local_law=ex.local_law, solver="sqp", robust=True)
+    cache = tmp_path_factory.getbasetemp() / "cmpc_sequences"
+    cache.mkdir(exist_ok=True)
+    ctrl = export_controller(ex, cache=str(cache), progress=False)
+    assert isinstance(ctrl, SetSequenceMPC) and ctrl.solver == "sqp" and ctrl.robust
+    seq = ctrl.seq
+    assert seq.status == "converged" and seq.info["eps"] == ex.info["sequence"]["eps"]
     d = tmp_path_factory.mktemp("e9")
     info = ctrl.export_c(d / "c", x0=[1.75, -1.6], steps=25)
     return ex, seq, ctrl, info
@@ -82,6 +88,7 @@ def test_generated_code_is_strict_c99_standalone_and_the_example_runs(e9):
     d = info.directory
     mk = (d / "Makefile").read_text()
     assert "-std=c99 -Wall -Wextra -Werror -O2" in mk
+    assert "CC ?= cc" in mk and "\t$(CC) $(CFLAGS)" in mk
     subprocess.run(["make", "-C", str(d)], check=True, capture_output=True)
     ldd = subprocess.run(["ldd", str(d / "libcmpc.so")], capture_output=True, text=True)
     libs = [ln.split()[0] for ln in ldd.stdout.splitlines() if ln.strip()]
@@ -102,6 +109,7 @@ def e8(tmp_path_factory):
     ex = cm.models.load("cannon")
     kw = dict(ex.info["mpc"])
     kw["solver"] = "sqp"
+    kw["mode"] = "receding"  # what the C controller does: solve at every step
     ctrl = cm.ContractiveMPC(ex.model, **kw)
     d = tmp_path_factory.mktemp("e8")
     return ex, ctrl, ctrl.export_c(d / "c", x0=[1.9, -1.5])
@@ -159,7 +167,8 @@ def test_bad_input_is_refused(e9, tmp_path):
                  tmp_path / "c")
     # a contractive MPC without a fixed horizon
     with pytest.raises(ExportError, match="fixed horizon"):
-        export_c(cm.ContractiveMPC(cm.models.load("cannon").model, solver="sqp"),
+        export_c(cm.ContractiveMPC(cm.models.load("cannon").model, solver="sqp",
+                                   mode="receding"),
                  tmp_path / "d")
     # overwrite=True replaces the contents
     (tmp_path / "e").mkdir()
@@ -217,3 +226,65 @@ def test_terminal_membership_in_c_is_exact_on_facets(e9):
         n_in += inside
         n_out += not inside
     assert n_in > 50 and n_out > 50
+
+
+def _executable(d, name):
+    """An executable ``d/name`` that does nothing (a stand-in tool on a test PATH)."""
+    f = d / name
+    f.write_text("#!/bin/sh\nexit 0\n")
+    f.chmod(0o755)
+    return f
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
+def test_the_makefile_compiles_with_cc_unless_told_otherwise(e8, monkeypatch):
+    """The Makefile calls $(CC): cc by default (what the README says), another compiler
+    with make CC=... or the environment's CC (read from make's dry run)."""
+    *_, info = e8
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.delenv("MAKEFLAGS", raising=False)
+
+    def compilers(*extra):
+        res = subprocess.run(["make", "-n", "-B", "-C", str(info.directory), *extra],
+                             capture_output=True, text=True, check=True)
+        return {ln.split()[0] for ln in res.stdout.splitlines()
+                if "-std=c99" in ln and not ln.startswith("make")}
+
+    assert compilers() == {"cc"}
+    assert compilers("CC=gcc") == {"gcc"}
+    monkeypatch.setenv("CC", "clang")
+    assert compilers() == {"clang"}
+
+
+def test_build_tools_are_checked_and_named(tmp_path, monkeypatch):
+    """check_build_tools names every missing tool; build() refuses before running make."""
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.setenv("PATH", str(empty))
+    with pytest.raises(ExportError, match=r"'make' and a C compiler .* not installed"):
+        check_build_tools()
+    only_make = tmp_path / "only_make"
+    only_make.mkdir()
+    _executable(only_make, "make")
+    monkeypatch.setenv("PATH", str(only_make))
+    with pytest.raises(ExportError, match=r"^a C compiler \('cc', 'gcc' or 'clang'\) is not"):
+        check_build_tools()
+    _executable(only_make, "gcc")
+    assert check_build_tools() == "gcc"  # no cc: the next compiler found
+    _executable(only_make, "cc")
+    assert check_build_tools() == "cc"
+    monkeypatch.setenv("CC", "my-cc -O1")
+    with pytest.raises(ExportError, match=r"the C compiler 'my-cc -O1' \(from \$CC\)"):
+        check_build_tools()
+    _executable(only_make, "my-cc")
+    assert check_build_tools() == "my-cc -O1"
+    assert check_build_tools(cc="gcc") == "gcc"
+    # build() checks first: the stand-in make would have 'built' nothing either way, but
+    # without make on PATH it is refused with the tools named, and nothing is written
+    (tmp_path / "exp").mkdir()
+    (tmp_path / "exp" / "Makefile").write_text("all:\n")
+    monkeypatch.setenv("PATH", str(empty))
+    with pytest.raises(ExportError, match="'make'"):
+        build(tmp_path / "exp")
+    assert sorted(p.name for p in (tmp_path / "exp").iterdir()) == ["Makefile"]

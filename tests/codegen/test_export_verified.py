@@ -243,7 +243,7 @@ def test_contractive_check_claims_only_what_the_python_certificate_proves(tmp_pa
     f = ca.vertcat(0.8 * x[0] + 0.1 * x[1], x[1] + 0.1 * (ca.fmax(1e14 + u, 0) - 1e14))
     model = cm.Model(x=x, u=u, f=f, X=cm.Box([-2.0, -2.0], [2.0, 2.0]),
                      U=cm.Box([-4.0], [4.0]), name="cancelling_contractive")
-    ctrl = cm.ContractiveMPC(model, horizon=4, alpha=0.9, solver="sqp")
+    ctrl = cm.ContractiveMPC(model, horizon=4, alpha=0.9, solver="sqp", mode="receding")
     C = load(ctrl.export_c(tmp_path / "c").directory)
     claims = 0
     for p in np.random.default_rng(0).uniform(-1.5, 1.5, (300, 2)):
