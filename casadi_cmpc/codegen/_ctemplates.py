@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ._interval_c import PRELUDE
+from ..interval._cgen import PRELUDE
 
 _COMMON = r"""
 #define NX CMPC_NX

@@ -307,9 +307,9 @@ def _model_fun(model: Any) -> ca.Function:
 
 def _interval_c(funs: list[tuple[ca.Function, str]], what: str) -> str:
     """C text of the outward-rounded interval evaluations ``name(il, ih, ol, oh)`` of the
-    given Functions (see :mod:`._interval_c`); an ExportError names the operations without
-    an interval rule."""
-    from ._interval_c import UnsupportedIntervalOp, interval_function
+    given Functions (see :mod:`casadi_cmpc.interval._cgen`); an ExportError names the
+    operations without an interval rule."""
+    from ..interval._cgen import UnsupportedIntervalOp, interval_function
 
     out = []
     for fun, name in funs:

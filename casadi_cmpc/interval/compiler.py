@@ -420,7 +420,7 @@ class InclusionFunction:
         margin).
     kind : {"natural", "centered"}
         See :func:`inclusion`.
-    backend : {"auto", "numpy", "scalar"}
+    backend : {"auto", "numpy", "scalar", "native"}
         Evaluator of the boxes (see Notes).
     derived_outputs, evaluate : internal
         Restricted forms for derivative graphs: outputs whose constants were folded by
@@ -440,8 +440,8 @@ class InclusionFunction:
     source : str
         The generated numpy source (natural evaluator), for inspection.
     backend : str
-        ``"auto"``, ``"numpy"`` or ``"scalar"``: how batches are evaluated (see Notes). May
-        be reassigned.
+        ``"auto"``, ``"numpy"``, ``"scalar"`` or ``"native"``: how batches are evaluated (see
+        Notes). May be reassigned.
     scalar_unsupported : list of str
         CasADi operations of the Function (or of its centered graph) without a scalar
         evaluation; when not empty, every batch is evaluated with numpy.
@@ -455,8 +455,9 @@ class InclusionFunction:
 
     Notes
     -----
-    Two evaluators compute the same enclosures with the same rounding, domain and NaN rules
-    (:mod:`casadi_cmpc.interval.arith`):
+    Three evaluators compute enclosures with the same rounding, domain and NaN rules
+    (:mod:`casadi_cmpc.interval.arith`), all generated from one walk of the instruction list
+    (the same constant folding and constants):
 
     * **numpy**: one numpy interval operation per CasADi instruction over the whole batch
       (8-20 ufunc calls each): a fixed cost of a few µs per instruction, then tens of
@@ -468,21 +469,31 @@ class InclusionFunction:
       of numpy; libm functions may differ in the last bits (both are covered by the same
       256-ulp margin). It is generated when first used.
 
+    * **native** (natural form): a fused C loop, every operation of one box in registers, the
+      outward-rounded rules of :mod:`._cgen` (those of the exported controllers; they hold
+      in every FPU rounding mode), compiled once by the system C compiler and cached on
+      disk (:mod:`._native`). About 5 µs per call plus 0.1 µs per box and instruction: 3-5
+      times cheaper than numpy for batches of 30 to 1000 boxes, as nested searches make
+      them; on par with numpy's vectorised libm for 1e5 boxes. Without a C compiler numpy
+      evaluates instead (one warning per process).
+
     ``backend="auto"`` (default) evaluates batches of ``1 <= N <= scalar_max_batch`` boxes
     (``scalar_max_batch_centered`` for the centered form) with the scalar evaluator and
-    larger ones with numpy; ``"numpy"`` and ``"scalar"`` force one (an empty batch always
-    goes to numpy). The centered form's scalar evaluation runs its Jacobian graph on floats
-    and combines the mean-value terms in Python exactly as :meth:`_centered_impl` does (its
-    jump guard encloses the guard expressions with scalar code too). A Function with an
-    operation the scalar evaluator lacks is evaluated with numpy whatever the backend
-    (:attr:`scalar_unsupported` names them), as is a batch on which Python raises an
-    arithmetic exception (e.g. inverted bounds passed to :meth:`evaluate_unchecked`).
+    larger ones with numpy, the natural form with the native kernel once the function has
+    evaluated :attr:`native_after` batches; ``"numpy"``, ``"scalar"`` and ``"native"``
+    force one (an empty batch always goes to numpy). The centered form's scalar evaluation runs
+    its Jacobian graph on floats and combines the mean-value terms in Python exactly as
+    :meth:`_centered_impl` does (its jump guard encloses the guard expressions with scalar code
+    too). A Function with an operation the scalar evaluator lacks is evaluated with numpy
+    whatever the backend (:attr:`scalar_unsupported` names them), as is a batch on which Python
+    raises an arithmetic exception (e.g. inverted bounds passed to :meth:`evaluate_unchecked`).
     """
 
     chunk: int = 8192
     chunk_centered: int = 4096
     scalar_max_batch: int = 32
     scalar_max_batch_centered: int = 16
+    native_after: int = 16
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
                  backend: str = "auto", derived_outputs: Sequence[int] = (),
@@ -542,6 +553,8 @@ class InclusionFunction:
                                              | set(_scalar_unsupported(self._g)))
         self._scalar_capable = not self.scalar_unsupported
         self._is_natural = self._natural_form()
+        self._native: Any = None  # the native kernel; False: not available
+        self._native_batches = 0  # batches evaluated so far by numpy (auto: when to compile)
 
     # ---------------------------------------------------------------- natural
     def _inputs(self, args: Sequence[Any]) -> tuple[list[np.ndarray], int]:
@@ -744,6 +757,9 @@ class InclusionFunction:
             return self._centered_impl(boxes, n)
 
     def _centered_impl(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
+        native = self._centered_native() if self._wants_native(n) else None
+        if native is not None and native[0] == "fused":
+            return native[1](boxes, n)
         il: list[np.ndarray] = []
         ih: list[np.ndarray] = []
         mids: list[np.ndarray] = []
@@ -760,10 +776,12 @@ class InclusionFunction:
             il.append(lo)
             ih.append(hi)
             mids.append(m)
-        # the thin midpoint boxes [m, m] share one array for both bounds: the evaluator
-        # never writes into its inputs
-        o: list[list[Any]] = [[None] * k for k in self._g_nnz]
-        self._g_eval(mids + il, mids + ih, o)
+        o = self._g_native_eval(mids, il, ih, n) if native is not None else None
+        if o is None:
+            # the thin midpoint boxes [m, m] share one array for both bounds: the evaluator
+            # never writes into its inputs
+            o = [[None] * k for k in self._g_nnz]
+            self._g_eval(mids + il, mids + ih, o)
         k = self.n_out
         fm, jac, fb = o[:k], o[k], o[k + 1:]
         # S_r >= sum_j mag(J_rj) * rad_j, so that J (Z - m) lies in [-S, S]. The terms are
@@ -1088,7 +1106,73 @@ class InclusionFunction:
         """
         if 0 < n <= self._scalar_limit():
             return self._run_scalar([b.tolist() for b in boxes], n, boxes)
+        if n and self._is_natural and self._wants_native(n):
+            run = self._native_kernel()
+            if run is not None:
+                return run(boxes, n)
         return self._numpy(boxes, n)
+
+    def _wants_native(self, n: int) -> bool:
+        """Whether a batch of ``n`` boxes goes to the native kernel: always with
+        ``backend="native"``; with ``"auto"`` once this function has evaluated
+        :attr:`native_after` batches with numpy (a search or a controller that calls it
+        again and again: the compilation, about 0.1 s, or its load from the disk cache,
+        about 10 ms, then pays for itself). Deterministic: the choice depends on the calls
+        made, not on timings."""
+        if self.backend == "native":
+            return True
+        if self.backend != "auto" or self._native is False:
+            return False
+        self._native_batches += 1
+        return self._native_batches > self.native_after
+
+    def _centered_native(self) -> tuple[str, Any] | None:
+        """The native centered form: ``("fused", run)``, one C loop doing all of
+        :meth:`_centered_impl` (without a jump guard), or ``("g", (run, pos))``, the graph G
+        alone (with one: the guard and the combination stay in numpy); None: numpy."""
+        if self._native is None:
+            from ._native import centered_source, load_kernel, native_kernel
+
+            g = self._g
+            run = None
+            if not self._guard.active:
+                src = centered_source(g, self._g_widen, self.size_in, self._out_pos,
+                                      self.size_out, self._jac_rows_list,
+                                      self._jac_cols_list, self._y_nz)
+                run = load_kernel(src, self.size_in, self.size_out) if src else None
+            if run is not None:
+                self._native = ("fused", run)
+            else:
+                pos = [np.asarray(g.sparsity_out(i).find(), dtype=np.intp)
+                       for i in range(g.n_out())]
+                k = native_kernel(g, self._g_widen, pos,
+                                  [g.numel_out(i) for i in range(g.n_out())])
+                self._native = ("g", (k, pos)) if k is not None else False
+        return self._native or None
+
+    def _g_native_eval(self, mids: list[np.ndarray], il: list[np.ndarray],
+                       ih: list[np.ndarray], n: int) -> list[list[Any]] | None:
+        """The centered graph G(mids, boxes) by the native kernel, in the layout of the
+        numpy evaluator (per output, a (lo, hi) pair of (N,) arrays per nonzero); None when
+        no kernel is available. A possibly undefined value comes out as [-inf, inf] instead
+        of NaN, which the mean-value combination treats alike (no information)."""
+        native = self._centered_native()
+        if native is None or native[0] != "g":
+            return None
+        run, pos = native[1]
+        ins = [np.stack([m.T, m.T], axis=-1) for m in mids]
+        ins += [np.stack([lo.T, hi.T], axis=-1) for lo, hi in zip(il, ih, strict=True)]
+        outs = run(ins, n)
+        return [[(a[:, p, 0], a[:, p, 1]) for p in ps] for a, ps in zip(outs, pos, strict=True)]
+
+    def _native_kernel(self) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
+        if self._native is None:
+            from ._native import native_kernel
+
+            k = native_kernel(self.fun, self._cwiden, self._out_pos, self.size_out,
+                              self._keep)
+            self._native = k if k is not None else False
+        return self._native or None
 
     def _numpy(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         """Evaluate with the numpy evaluators (in chunks for large batches)."""
@@ -1112,7 +1196,7 @@ class InclusionFunction:
 
 
 _F64 = np.dtype(np.float64)
-_BACKENDS = ("auto", "numpy", "scalar")
+_BACKENDS = ("auto", "numpy", "scalar", "native")
 
 
 def _check_backend(backend: Any) -> str:

@@ -1,4 +1,4 @@
-"""The generated C interval evaluation (casadi_cmpc.codegen._interval_c) encloses the exact
+"""The generated C interval evaluation (casadi_cmpc.interval._cgen) encloses the exact
 value of every supported operation: a Function using them all is compiled alone with the
 interval helpers and compared with mpmath at 60 digits on random points."""
 
@@ -14,7 +14,7 @@ import mpmath
 import numpy as np
 import pytest
 
-from casadi_cmpc.codegen._interval_c import (
+from casadi_cmpc.interval._cgen import (
     PRELUDE,
     UnsupportedIntervalOp,
     c_double,

@@ -7,7 +7,9 @@
   scalar compiler inlines) element by element.
 * :func:`compiled` builds an :class:`~casadi_cmpc.interval.InclusionFunction` that evaluates
   every batch with the given backend; the scalar one raises instead of falling back to
-  numpy, so that a test of it really tests the scalar code.
+  numpy, so that a test of it really tests the scalar code. :data:`COMPILED_BACKENDS` adds
+  ``"native"`` (the fused C loop) where a C compiler is installed; a native inclusion of a
+  Function whose operations all have a C rule is checked to really run the C kernel.
 """
 
 from __future__ import annotations
@@ -17,10 +19,13 @@ from typing import Any
 import numpy as np
 
 from casadi_cmpc.interval import arith
+from casadi_cmpc.interval._cgen import unsupported_ops
+from casadi_cmpc.interval._native import native_available
 from casadi_cmpc.interval._scalar import scalar_op
 from casadi_cmpc.interval.compiler import InclusionFunction
 
-BACKENDS = ["numpy", "scalar"]
+BACKENDS = ["numpy", "scalar"]  # operation-level backends (ARITH)
+COMPILED_BACKENDS = BACKENDS + (["native"] if native_available() else [])
 
 _WITH_CONSTANT_LAST = ("addc", "mulc", "divc", "powc", "powi")
 _WITH_CONSTANT_FIRST = ("csub", "cdiv")
@@ -77,4 +82,10 @@ def compiled(fun: Any, kind: str = "natural", backend: str = "numpy") -> Inclusi
     if backend == "scalar":
         assert not F.scalar_unsupported, F.scalar_unsupported
         F._scalar_strict = True
+    if backend == "native" and F._is_natural:
+        try:
+            ok = not unsupported_ops(F.fun)
+        except ValueError:  # a ParamFunction or a restricted form: the kernel decides
+            ok = True
+        assert (F._native_kernel() is not None) or not ok, "the native kernel was not built"
     return F

@@ -22,7 +22,7 @@ import mp_reference as R
 import mpmath
 import numpy as np
 import pytest
-from backends import BACKENDS, compiled
+from backends import COMPILED_BACKENDS, compiled
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -33,7 +33,7 @@ SETTINGS = settings(max_examples=100, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
-@pytest.fixture(scope="module", params=BACKENDS)
+@pytest.fixture(scope="module", params=COMPILED_BACKENDS)
 def backend(request):
     """The evaluator of the compiled inclusion functions."""
     return request.param

@@ -31,7 +31,7 @@ import mp_reference as R
 import mpmath
 import numpy as np
 import pytest
-from backends import ARITH, BACKENDS, compiled
+from backends import ARITH, BACKENDS, COMPILED_BACKENDS, compiled
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -52,7 +52,7 @@ def _backend_ops(request):
     return ARITH[request.param]
 
 
-@pytest.fixture(scope="module", params=BACKENDS)
+@pytest.fixture(scope="module", params=COMPILED_BACKENDS)
 def backend(request):
     """The evaluator of the compiled inclusion functions."""
     return request.param

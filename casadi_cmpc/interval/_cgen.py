@@ -19,9 +19,10 @@ Rounding rules (those of :mod:`casadi_cmpc.interval.arith`):
   negative one).
 * libm functions (exp, log, sin, ...): a margin of ``2**-44`` relative (256 ulps) plus
   ``2**-1060`` absolute, then one ulp; results are intersected with the range of the
-  function. ``sin``/``cos`` use the Lipschitz bound ``|sin t - sin m| <= |t - m|`` around
-  the midpoint and give ``[-1, 1]`` beyond ``|t| = 1e8`` (as the Python backend);
-  ``tan`` is ``sin / cos``.
+  function. ``sin``/``cos``: the values at the ends, and ``1`` (``-1``) where the box
+  (conservatively) holds a maximum (minimum), ``[-1, 1]`` for a box of width ``2 pi`` or
+  beyond ``|t| = 1e8``; ``tan``: increasing between poles, possibly undefined where a pole
+  may lie in the box (the rules of the Python backend).
 * Exact operations (negation, ``fabs``, ``fmin``/``fmax``, ``floor``/``ceil``, ``sign``,
   comparisons, ``if_else``) are not widened.
 * A NaN bound means "possibly undefined": it is two-sided, it propagates through every
@@ -94,7 +95,7 @@ def c_double(v: float) -> str:
 def _as_sx(fun: ca.Function) -> ca.Function:
     """``fun`` checked as for the Python interval compiler (SX or expandable, no free
     symbols, dense inputs), its refusals raised as :class:`UnsupportedIntervalOp`."""
-    from ..interval.compiler import _as_sx_function
+    from .compiler import _as_sx_function
 
     try:
         return _as_sx_function(fun)
@@ -213,6 +214,7 @@ typedef struct { double lo, hi; } civ;
 #define CIV_AL 0x1p-1060
 #define CIV_TINY 0x1p-1074
 #define CIV_PI_HI 0x1.921fb54442d19p+1      /* above pi */
+#define CIV_PI_LO 0x1.921fb54442d18p+1      /* below pi */
 #define CIV_HALF_PI_HI 0x1.921fb54442d19p+0 /* above pi / 2 */
 #define CIV_SIN_SAFE 1e8                    /* beyond: sin, cos in [-1, 1] */
 
@@ -372,21 +374,45 @@ static inline civ civ_cosh(civ a) { /* even: cosh of [mignitude, magnitude] */
     return civ_inc(cosh(m.lo), cosh(m.hi), 1.0, INFINITY);
 }
 
-/* sin, cos: |f(t) - f(m)| <= |t - m| around the midpoint m (1-Lipschitz) */
-static inline civ civ_lipschitz1(civ a, double (*f)(double)) {
-    double m, r, s;
-    if (civ_isnan(a)) return a;
-    if (!(a.lo >= -CIV_SIN_SAFE && a.hi <= CIV_SIN_SAFE)) return civ_make(-1.0, 1.0);
-    m = 0.5 * a.lo + 0.5 * a.hi;
-    r = civ_max(civ_up(m - a.lo), civ_up(a.hi - m));
-    s = f(m);
-    if (s != s) return civ_nan();
-    return civ_make(civ_max(civ_dn(civ_dnf(s) - r), -1.0), civ_min(civ_up(civ_upf(s) + r), 1.0));
+/* Does [lo, hi] contain off + k period for an integer k? Conservative: may answer yes when it
+ * does not (which only widens), never no when it does (the slack dwarfs the rounding of the
+ * quotients, in every rounding mode). */
+static inline int civ_contains_point(double lo, double hi, double off, double period) {
+    double kl = (lo - off) / period, kh = (hi - off) / period;
+    double slack = 1e-9 + 1e-15 * (fabs(kl) + fabs(kh));
+    return floor(kh + slack) >= ceil(kl - slack);
 }
 
-static inline civ civ_sin(civ a) { return civ_lipschitz1(a, sin); }
-static inline civ civ_cos(civ a) { return civ_lipschitz1(a, cos); }
-static inline civ civ_tan(civ a) { return civ_div(civ_sin(a), civ_cos(a)); }
+/* sin, cos: f at the ends, and 1 (-1) where the box holds a maximum (minimum) of f; the
+ * whole [-1, 1] for a box of width 2 pi or more or beyond |t| = 1e8 */
+static inline civ civ_sincos(civ a, double (*f)(double), double max_off, double min_off) {
+    double fl, fh, lo, hi, two_pi = 2.0 * CIV_PI_LO;
+    if (civ_isnan(a)) return a;
+    if (!(a.hi - a.lo < two_pi && fabs(a.lo) <= CIV_SIN_SAFE && fabs(a.hi) <= CIV_SIN_SAFE))
+        return civ_make(-1.0, 1.0);
+    fl = f(a.lo);
+    fh = f(a.hi);
+    if (fl != fl || fh != fh) return civ_make(-1.0, 1.0);
+    lo = civ_max(civ_dnf(civ_min(fl, fh)), -1.0);
+    hi = civ_min(civ_upf(civ_max(fl, fh)), 1.0);
+    if (civ_contains_point(a.lo, a.hi, max_off, two_pi)) hi = 1.0;
+    if (civ_contains_point(a.lo, a.hi, min_off, two_pi)) lo = -1.0;
+    return civ_make(lo, hi);
+}
+
+static inline civ civ_sin(civ a) {
+    return civ_sincos(a, sin, 0.5 * CIV_PI_LO, -0.5 * CIV_PI_LO);
+}
+static inline civ civ_cos(civ a) { return civ_sincos(a, cos, 0.0, CIV_PI_LO); }
+
+/* tan: increasing between its poles; possibly undefined where the box may hold a pole */
+static inline civ civ_tan(civ a) {
+    if (civ_isnan(a)) return a;
+    if (!(a.hi - a.lo < CIV_PI_LO && fabs(a.lo) <= CIV_SIN_SAFE && fabs(a.hi) <= CIV_SIN_SAFE)
+        || civ_contains_point(a.lo, a.hi, 0.5 * CIV_PI_LO, CIV_PI_LO))
+        return civ_nan();
+    return civ_inc(tan(a.lo), tan(a.hi), -INFINITY, INFINITY);
+}
 
 /* ---- powers */
 static inline civ civ_pow_int(civ a, double n) { /* n integer, |n| < 2^31 */

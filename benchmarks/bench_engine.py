@@ -1,0 +1,143 @@
+"""The interval engine per core: the native backend against numpy, measured in one run.
+
+Prints one JSON line:
+
+* ``inclusion_1e5``: the CSTR natural inclusion at 1e5 boxes, boxes per second with the
+  native backend (fused C loop) and with numpy, their ratio, and CasADi's own batched point
+  evaluation (``Function.map``, no intervals) as the hardware anchor; immrax where installed.
+* ``batch_300``: the CSTR natural and centered inclusions at 300 boxes (the mean batch of the
+  set searches), µs per call, native against numpy.
+* ``call_n1``: one natural call at N = 1 on the 2-state cannon model (E8), µs, with the
+  default backend (the scalar evaluator at this size) and with the native one.
+* ``e9_sequence``: the E9 robust controllable sequence at eps 0.05, seconds with numpy forced
+  against the default backend (native once a function is called repeatedly), and whether
+  the sets are identical.
+
+Ratios are what counts: the machine is shared.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+
+import numpy as np
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import casadi_cmpc as cm  # noqa: E402
+from casadi_cmpc.interval import InclusionFunction  # noqa: E402
+from casadi_cmpc.interval._native import native_available  # noqa: E402
+
+
+def _median_time(fn, reps: int = 15) -> float:
+    fn()
+    ts = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def _cstr_boxes(model: cm.Model, N: int, seed: int = 0) -> tuple:
+    rng = np.random.default_rng(seed)
+    c = rng.uniform(model.X.lo, model.X.hi, (N, 2))
+    X = np.stack([c - 0.01, c + 0.01], -1)
+    U = np.stack([np.full((N, 1), -0.1), np.full((N, 1), 0.1)], -1)
+    return X, U, np.zeros((1, 0, 2))
+
+
+def inclusion_1e5() -> dict:
+    m = cm.models.load("cstr").model
+    f = m.function
+    args = _cstr_boxes(m, 100_000)
+    nat = InclusionFunction(f, backend="native")
+    num = InclusionFunction(f, backend="numpy")
+    pts = f.map(100_000)
+    xm = 0.5 * (args[0][..., 0] + args[0][..., 1])
+    um = 0.5 * (args[1][..., 0] + args[1][..., 1])
+    t_nat = _median_time(lambda: nat(*args), 7)
+    t_num = _median_time(lambda: num(*args), 7)
+    t_pt = _median_time(lambda: pts(xm.T, um.T, np.zeros((0, 100_000))), 7)
+    out = {"native_boxes_per_s": 1e5 / t_nat, "numpy_boxes_per_s": 1e5 / t_num,
+           "casadi_points_per_s": 1e5 / t_pt, "native_over_numpy": t_num / t_nat,
+           "native_cost_over_casadi_point": t_nat / t_pt}
+    try:
+        import immrax  # noqa: F401  (benchmark-only; rounds to nearest: not sound)
+        out["immrax"] = "installed, not measured here"
+    except ImportError:
+        out["immrax"] = "not installed"
+    return out
+
+
+def batch_300() -> dict:
+    m = cm.models.load("cstr").model
+    args = _cstr_boxes(m, 300, 1)
+    res = {}
+    for kind in ("natural", "centered"):
+        nat = InclusionFunction(m.function, kind, backend="native")
+        num = InclusionFunction(m.function, kind, backend="numpy")
+        a, b = _median_time(lambda f=nat: f(*args), 40), _median_time(lambda f=num: f(*args), 40)
+        res[kind] = {"native_us": a * 1e6, "numpy_us": b * 1e6, "numpy_over_native": b / a}
+    return res
+
+
+def call_n1() -> dict:
+    m = cm.models.load("cannon").model
+    X = np.array([[[0.1, 0.11], [0.2, 0.21]]])
+    U = np.array([[[0.0, 0.1]]])
+    auto = m.inclusion("natural")
+    nat = InclusionFunction(m.function, backend="native")
+    W = np.zeros((1, m.l, 2)) if m.l else np.zeros((1, 0, 2))
+    n_in = m.function.n_in()
+    args = (X, U, W)[:n_in]
+    reps = 2000
+
+    def per_call(fn) -> float:
+        fn()
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        return (time.perf_counter() - t0) / reps
+
+    return {"auto_us": per_call(lambda: auto(X, U)) * 1e6,
+            "native_us": per_call(lambda: nat(*args)) * 1e6}
+
+
+def e9_sequence() -> dict:
+    ex = cm.models.load("cannon_robust")
+
+    def run() -> tuple[float, object]:
+        t0 = time.perf_counter()
+        seq = cm.controllable_sets(ex.model, ex.terminal, 0.05, robust=True,
+                                   law=ex.local_law, progress=False)
+        return time.perf_counter() - t0, seq
+
+    saved = InclusionFunction.native_after
+    InclusionFunction.native_after = 10**12  # numpy (and scalar) only
+    try:
+        t_num, s_num = run()
+    finally:
+        InclusionFunction.native_after = saved
+    t_auto, s_auto = run()
+    same = len(s_num.steps) == len(s_auto.steps) and all(
+        np.array_equal(a["boxes"], b["boxes"]) for a, b in zip(s_num.steps, s_auto.steps,
+                                                                strict=True))
+    return {"numpy_s": t_num, "default_s": t_auto, "speedup": t_num / t_auto,
+            "identical_sets": bool(same), "steps": len(s_auto.steps)}
+
+
+def main() -> dict:
+    if not native_available():
+        return {"error": "no C compiler: the native backend is not available"}
+    res = {"machine": platform.machine(), "cpus": os.cpu_count(),
+           "inclusion_1e5": inclusion_1e5(), "batch_300": batch_300(), "call_n1": call_n1(),
+           "e9_sequence": e9_sequence()}
+    return res
+
+
+if __name__ == "__main__":
+    print(json.dumps(main()))

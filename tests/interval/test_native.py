@@ -1,0 +1,202 @@
+"""The native backend (a fused C loop over the boxes): sound against a 300-bit reference,
+independent of the FPU rounding mode, cached on disk, and replaced by numpy with one
+warning where no C compiler is found."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import warnings
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from mp_reference import Undefined, eval_function, inside
+
+import casadi_cmpc as cm
+from casadi_cmpc.interval import InclusionFunction
+from casadi_cmpc.interval import _native as nat
+
+pytestmark = pytest.mark.skipif(not nat.native_available(), reason="needs a C compiler")
+
+_UNARY = [ca.sin, ca.cos, ca.exp, ca.tanh, ca.atan, lambda v: ca.log(1 + v * v), ca.fabs,
+          lambda v: ca.sqrt(1 + v * v), ca.sinh, lambda v: v ** 3, ca.floor]
+
+
+def _model_like(n: int, ops: list[int], seed: int) -> ca.Function:
+    """A random n-state map with unary operations, products, constants and a division."""
+    rng = np.random.default_rng(seed)
+    x = ca.SX.sym("x", n)
+    u = ca.SX.sym("u")
+    out = []
+    for i in range(n):
+        g = _UNARY[ops[i % len(ops)]]
+        c = float(rng.normal())
+        out.append(x[i] + 0.1 * g(c * x[(i + 1) % n] + u) - x[i] * x[(i + 2) % n] / 3
+                   + 0.1 * u / (2 + x[i] ** 2))
+    return ca.Function("f", [x, u], [ca.vertcat(*out)])
+
+
+def _boxes(rng: np.random.Generator, N: int, d: int, scale: float) -> np.ndarray:
+    c = rng.uniform(-2, 2, (N, d))
+    r = rng.uniform(0, scale, (N, d))
+    return np.stack([c - r, c + r], -1)
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 4), ops=st.lists(st.integers(0, len(_UNARY) - 1), min_size=1,
+                                          max_size=4), seed=st.integers(0, 10**6))
+def test_native_encloses_the_exact_value_and_agrees_with_numpy(n, ops, seed):
+    f = _model_like(n, ops, seed)
+    rng = np.random.default_rng(seed)
+    X, U = _boxes(rng, 40, n, 0.3), _boxes(rng, 40, 1, 0.3)
+    Fn = InclusionFunction(f, backend="native")
+    assert Fn._native_kernel() is not None
+    a = Fn(X, U)[0]
+    b = InclusionFunction(f, backend="numpy")(X, U)[0]
+    assert np.all(a[..., 0] <= a[..., 1])
+    for k in range(0, 40, 4):  # the exact value at points of the boxes (300 bits)
+        for t in (0.0, 0.37, 1.0):
+            px = X[k, :, 0] + t * (X[k, :, 1] - X[k, :, 0])
+            pu = U[k, :, 0] + (1 - t) * (U[k, :, 1] - U[k, :, 0])
+            try:
+                ref = eval_function(f, [list(px), list(pu)])[0]
+            except Undefined:
+                continue
+            for j in range(n):
+                assert inside(a[k, j, 0], a[k, j, 1], ref[j]), (k, j)
+    # the same rules as numpy: a few ulps of the operands apart, or both uninformative
+    fin = np.isfinite(a) & np.isfinite(b)
+    assert np.allclose(a[fin], b[fin], rtol=1e-10, atol=1e-12)
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+
+
+def _fesetround(libm: ctypes.CDLL, mode: int) -> int:
+    return libm.fesetround(ctypes.c_int(mode))
+
+
+def test_native_is_sound_in_every_rounding_mode():
+    """codac switches the FPU to upward rounding in the same process: the kernel's bounds
+    move outward by an ulp in every mode, so they still hold the exact values."""
+    libm = ctypes.CDLL(ctypes.util.find_library("m"))
+    modes = {"upward": 0x800, "downward": 0x400, "toward zero": 0xC00}  # x86-64 values
+    if ctypes.util.find_library("m") is None or libm.fegetround() != 0:
+        pytest.skip("fesetround not available as expected")
+    f = _model_like(3, [0, 2, 6], 7)
+    rng = np.random.default_rng(3)
+    X, U = _boxes(rng, 30, 3, 1e-9), _boxes(rng, 30, 1, 1e-9)  # thin: rounding matters
+    Fn = InclusionFunction(f, backend="native")
+    Fn._native_kernel()
+    for name, mode in modes.items():
+        assert _fesetround(libm, mode) == 0
+        try:
+            a = Fn(X, U)[0]
+        finally:
+            _fesetround(libm, 0)
+        for k in range(30):
+            ref = eval_function(f, [list(X[k, :, 0]), list(U[k, :, 0])])[0]
+            for j in range(3):
+                assert inside(a[k, j, 0], a[k, j, 1], ref[j]), (name, k, j)
+
+
+def test_kernels_are_cached_on_disk_by_their_source(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(nat, "_loaded", {})
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("g", [x], [ca.vertcat(ca.exp(x[0]) * x[1], x[0] - 0.3 * x[1])])
+    assert InclusionFunction(f, backend="native")._native_kernel() is not None
+    files = sorted((tmp_path / "casadi_cmpc" / "kernels").glob("k*.so"))
+    assert len(files) == 1
+    stamp = files[0].stat().st_mtime_ns
+    monkeypatch.setattr(nat, "_loaded", {})  # a new process: loaded from the disk cache
+    G = InclusionFunction(ca.Function("g2", [x], [f(x)]), backend="native")
+    assert G._native_kernel() is not None
+    assert sorted((tmp_path / "casadi_cmpc" / "kernels").glob("k*.so")) == files
+    assert files[0].stat().st_mtime_ns == stamp
+    X = np.array([[[0.1, 0.2], [1.0, 1.5]]])
+    np.testing.assert_array_equal(G(X)[0], InclusionFunction(f, backend="native")(X)[0])
+
+
+def test_without_a_compiler_numpy_evaluates_after_one_warning(monkeypatch):
+    monkeypatch.setattr(nat, "_state", {"cc": None, "checked": True, "warned": False})
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("h", [x], [ca.sin(x[0]) * x[1]])
+    X = np.array([[[0.1, 0.2], [1.0, 1.5]]] * 50)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        a = InclusionFunction(f, backend="native")(X)[0]
+        InclusionFunction(f, backend="native")(X)
+    assert sum(issubclass(w.category, cm.CmpcWarning) for w in rec) == 1
+    assert "no C compiler" in str(rec[0].message)
+    np.testing.assert_array_equal(a, InclusionFunction(f, backend="numpy")(X)[0])
+
+
+def test_auto_moves_to_native_after_repeated_batches():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("k", [x], [ca.vertcat(x[0] * x[1], ca.cos(x[0]))])
+    F = InclusionFunction(f)  # auto
+    X = np.tile(np.array([[[0.1, 0.2], [1.0, 1.5]]]), (100, 1, 1))
+    for _ in range(F.native_after):
+        F(X)
+    assert F._native is None  # numpy so far
+    out = F(X)[0]
+    assert callable(F._native)
+    ref = InclusionFunction(f, backend="numpy")(X)[0]
+    assert np.all(out[..., 0] <= ref[..., 0] + 1e-15) and np.all(out[..., 1] >= ref[..., 1] - 1e-15)
+
+
+def test_overflow_and_undefined_widen_never_narrow():
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("o", [x], [ca.vertcat(ca.exp(x[0]), ca.log(x[1]), x[0] / x[1],
+                                          ca.sqrt(x[1]))])
+    X = np.array([[[709.0, 710.0], [-1.0, 1.0]], [[1.0, 2.0], [0.5, 1.0]]])
+    a = InclusionFunction(f, backend="native")(X)[0]
+    assert a[0, 0, 1] == np.inf and a[0, 0, 0] <= np.exp(709.0)
+    assert (a[0, 1] == (-np.inf, np.inf)).all()  # log of a box reaching below 0
+    assert (a[0, 2] == (-np.inf, np.inf)).all()  # division by a box holding 0
+    assert (a[0, 3] == (-np.inf, np.inf)).all()
+    assert a[1, 1, 0] <= np.log(0.5) <= a[1, 1, 1] and a[1, 1, 1] >= 0.0
+
+
+@settings(max_examples=20, deadline=None)
+@given(n=st.integers(1, 4), ops=st.lists(st.sampled_from([0, 1, 2, 3, 4, 7, 8, 9]),
+                                          min_size=1, max_size=3),
+       seed=st.integers(0, 10**6))
+def test_native_centered_form_encloses_the_exact_value_and_matches_numpy(n, ops, seed):
+    """The fused mean-value kernel (midpoints, radii, G, combination in one C loop) and the
+    numpy form: both enclose the exact values, and they are the same to a few ulps."""
+    f = _model_like(n, ops, seed)
+    rng = np.random.default_rng(seed)
+    X, U = _boxes(rng, 30, n, 0.05), _boxes(rng, 30, 1, 0.05)
+    Fn = InclusionFunction(f, "centered", backend="native")
+    a = Fn(X, U)[0]
+    assert Fn._native and Fn._native[0] in ("fused", "g")
+    b = InclusionFunction(f, "centered", backend="numpy")(X, U)[0]
+    for k in range(0, 30, 3):
+        for t in (0.0, 0.61, 1.0):
+            px = X[k, :, 0] + t * (X[k, :, 1] - X[k, :, 0])
+            pu = U[k, :, 1] - t * (U[k, :, 1] - U[k, :, 0])
+            ref = eval_function(f, [list(px), list(pu)])[0]
+            for j in range(n):
+                assert inside(a[k, j, 0], a[k, j, 1], ref[j]), (k, j)
+    fin = np.isfinite(a) & np.isfinite(b)
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+    assert np.allclose(a[fin], b[fin], rtol=1e-10, atol=1e-12)
+
+
+def test_fused_centered_kernel_is_bit_identical_on_a_polynomial_model():
+    """Without libm calls both forms round the same operations the same way."""
+    ex = cm.models.load("cannon_robust")
+    m = ex.model
+    rng = np.random.default_rng(5)
+    c = rng.uniform(m.X.lo, m.X.hi, (500, 2))
+    X = np.stack([c - 0.03, c + 0.03], -1)
+    U = np.tile(np.array([[[-0.2, 0.3]]]), (500, 1, 1))
+    W = np.tile(m.W.as_array()[None], (500, 1, 1))
+    Fn = InclusionFunction(m.function, "centered", backend="native")
+    a = Fn(X, U, W)[0]
+    assert Fn._native[0] == "fused"
+    np.testing.assert_array_equal(a, InclusionFunction(m.function, "centered",
+                                                       backend="numpy")(X, U, W)[0])
