@@ -629,6 +629,18 @@ def _cache_command(cache: str | None, clear: bool) -> int:
             f.unlink()
     what = f"{len(files)} cached sequence file{'s' * (len(files) != 1)}, {_size(total)}"
     print(f"removed {what}" if clear else what)
+    from .interval._native import kernel_dir
+
+    kd = kernel_dir()
+    if kd.parent == d:  # the compiled interval kernels (the native backend) live here too
+        others = [o for o in others if o != kd.name]
+        kernels = sorted(kd.glob("k*.so")) if kd.is_dir() else []
+        size = sum(k.stat().st_size for k in kernels)
+        if clear:
+            for k in kernels:
+                k.unlink()
+        print(f"{'removed ' if clear else ''}{len(kernels)} compiled interval kernel"
+              f"{'s' * (len(kernels) != 1)} in {kd}, {_size(size)}")
     if others:
         print(f"  not written by cmpc (left alone): {', '.join(others)}")
     return 0

@@ -218,3 +218,30 @@ def test_a_file_of_the_previous_layout_still_loads(e8_short, tmp_path):
                       if isinstance(v, (str, int, float, bool, list, np.ndarray))}}
     path = _save_state("SetSequence", state, P_(tmp_path / "old.npz"))
     assert _same(_content(SetSequence.load(path)), _content(seq))
+
+
+def test_cmpc_cache_counts_and_clears_the_compiled_interval_kernels(tmp_path, monkeypatch,
+                                                                    capsys):
+    """The native backend's kernels live in the default cache directory: `cmpc cache`
+    counts them, `--clear` removes them (and nothing else there)."""
+    import casadi as ca
+    import numpy as np
+
+    from casadi_cmpc.interval import InclusionFunction
+    from casadi_cmpc.interval import _native as nat
+
+    if not nat.native_available():
+        return
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setattr(nat, "_loaded", {})
+    x = ca.SX.sym("x", 2)
+    F = InclusionFunction(ca.Function("kc", [x], [ca.exp(x[0]) - x[1]]), backend="native")
+    F(np.array([[[0.0, 1.0], [2.0, 3.0]]]))
+    kd = tmp_path / "casadi_cmpc" / "kernels"
+    assert len(list(kd.glob("k*.so"))) == 1
+    assert cli.main(["cache"]) == 0
+    out = capsys.readouterr().out
+    assert "1 compiled interval kernel in" in out and "left alone" not in out
+    assert cli.main(["cache", "--clear"]) == 0
+    assert "removed 1 compiled interval kernel" in capsys.readouterr().out
+    assert not list(kd.glob("k*.so"))

@@ -22,7 +22,7 @@ import numpy as np
 from .._interrupt import InterruptScope
 from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
-from ..interval.compiler import inclusion
+from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.box import Box
 from ..sets.paving import Paving
@@ -57,6 +57,20 @@ def _flatten(target: Any) -> list[Any]:
                     f"Zonotope, Box, SetUnion or a list of them; got {type(target).__name__}")
 
 
+def _rows_inclusion(model: Model, rows: int) -> Any:
+    """The centered inclusion of ``H f(x, u, w)`` with H (rows, n) an input: one per model and
+    number of rows, so that the targets of every level of a sequence (and every call) share
+    its compiled evaluators (numpy, scalar and native) instead of compiling new ones."""
+    cache = model.__dict__.setdefault("_rows_inclusions", {})
+    F = cache.get(rows)
+    if F is None:
+        H = ca.SX.sym("H", rows, model.n)
+        fun = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
+                          [ca.mtimes(H, model.f)])
+        F = cache[rows] = InclusionFunction(fun, "centered")
+    return F
+
+
 class _Target:
     """Proven tests of ``f(X, U, W) ⊆ T`` and ``f(X, U, W) ∩ T = ∅`` for batches of boxes.
 
@@ -80,11 +94,8 @@ class _Target:
                 if S.is_empty():
                     continue
                 A, b = np.asarray(S.A, dtype=float), np.asarray(S.b, dtype=float)
-                H = ca.SX.sym("H", A.shape[0], n)
-                fun = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
-                                  [ca.mtimes(H, model.f)])
                 Hb = A.ravel(order="F")
-                self.polys.append((inclusion(fun, "centered"),
+                self.polys.append((_rows_inclusion(model, A.shape[0]),
                                    np.stack([Hb, Hb], axis=-1)[None], b))
             elif isinstance(S, Paving):
                 if S.inner.shape[0]:

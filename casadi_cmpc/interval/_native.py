@@ -191,11 +191,13 @@ def kernel_source(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray]
 def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
                     out_pos: Sequence[np.ndarray], size_out: Sequence[int],
                     jac_rows: Sequence[int], jac_cols: Sequence[int],
-                    y_nz: Sequence[Sequence[int]]) -> str | None:
+                    y_nz: Sequence[Sequence[int]], with_natural: bool = False) -> str | None:
     """C source of the fused mean-value (centered) form: per box, the midpoint and the
     radii, the graph ``G(mid, box) -> [f(mid), J(box), f(box)]``, and the combination of
     :meth:`~.compiler.InclusionFunction._centered_impl` (the same operations in the same
-    order), in one loop over the batch. None: an operation has no C rule."""
+    order), in one loop over the batch. ``with_natural``: the natural enclosures ``f(box)``
+    follow as extra outputs (for a jump guard applied afterwards). None: an operation has no
+    C rule."""
     from . import arith
 
     base = _codegen_class()
@@ -230,6 +232,9 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
               for i in range(0, len(res), 12)]
     lines += [f"        const double *P{i} = in[{i}] + b * st[{i}];" for i in range(n_in)]
     lines += [f"        double *O{o} = out[{o}] + b * {2 * d};" for o, d in enumerate(size_out)]
+    if with_natural:
+        lines += [f"        double *N{o} = out[{k + o}] + b * {2 * d};"
+                  for o, d in enumerate(size_out)]
     # midpoints (inside the box) and radii rounded up, one per joint coordinate
     c = 0
     rad: list[str] = []
@@ -252,6 +257,8 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
         for j, row in enumerate(y_nz[i]):
             pos = int(out_pos[i][j])
             fm, fb = f"R{i}_{j}", f"R{k + 1 + i}_{j}"
+            if with_natural:
+                lines.append(f"        civ_store(N{i} + {2 * pos}, {fb});")
             terms = rows.get(int(row))
             if not terms:
                 lines.append(f"        civ_store(O{i} + {2 * pos}, {fb});")

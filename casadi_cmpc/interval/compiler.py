@@ -475,7 +475,9 @@ class InclusionFunction:
       disk (:mod:`._native`). About 5 µs per call plus 0.1 µs per box and instruction: 3-5
       times cheaper than numpy for batches of 30 to 1000 boxes, as nested searches make
       them; on par with numpy's vectorised libm for 1e5 boxes. Without a C compiler numpy
-      evaluates instead (one warning per process).
+      evaluates instead (one warning per process). Its enclosures may differ from numpy's
+      in the last bits (libm functions, a subnormal in the widening); both are sound, but a
+      function that has moved to it answers a repeated call with those bits.
 
     ``backend="auto"`` (default) evaluates batches of ``1 <= N <= scalar_max_batch`` boxes
     (``scalar_max_batch_centered`` for the centered form) with the scalar evaluator and
@@ -760,6 +762,17 @@ class InclusionFunction:
         native = self._centered_native() if self._wants_native(n) else None
         if native is not None and native[0] == "fused":
             return native[1](boxes, n)
+        if native is not None and native[0] == "fused_guarded":
+            outs = native[1](boxes, n)
+            res, nat = outs[:self.n_out], outs[self.n_out:]
+            jump = self._guard(boxes, n)  # the natural enclosure where a row may jump
+            for i in range(self.n_out):
+                for j, row in enumerate(self._y_nz[i]):
+                    rows = jump[:, row]
+                    if rows.any():
+                        p = self._out_pos_list[i][j]
+                        res[i][rows, p] = nat[i][rows, p]
+            return res
         il: list[np.ndarray] = []
         ih: list[np.ndarray] = []
         mids: list[np.ndarray] = []
@@ -1104,7 +1117,9 @@ class InclusionFunction:
         For solvers that build their own box batches; no shape or NaN checks are made. The
         backend is chosen as for a call (see the class Notes).
         """
-        if 0 < n <= self._scalar_limit():
+        # once compiled, the native kernel takes small batches too (its call costs a few
+        # µs; the scalar evaluator costs about 0.1 µs per box and instruction)
+        if 0 < n <= self._scalar_limit() and not self._native:
             return self._run_scalar([b.tolist() for b in boxes], n, boxes)
         if n and self._is_natural and self._wants_native(n):
             run = self._native_kernel()
@@ -1128,20 +1143,21 @@ class InclusionFunction:
 
     def _centered_native(self) -> tuple[str, Any] | None:
         """The native centered form: ``("fused", run)``, one C loop doing all of
-        :meth:`_centered_impl` (without a jump guard), or ``("g", (run, pos))``, the graph G
-        alone (with one: the guard and the combination stay in numpy); None: numpy."""
+        :meth:`_centered_impl`; ``("fused_guarded", run)``, the same with the natural
+        enclosures as extra outputs, used where the jump guard (evaluated as before) fires;
+        or ``("g", (run, pos))``, the graph G alone; None: numpy."""
         if self._native is None:
             from ._native import centered_source, load_kernel, native_kernel
 
             g = self._g
-            run = None
-            if not self._guard.active:
-                src = centered_source(g, self._g_widen, self.size_in, self._out_pos,
-                                      self.size_out, self._jac_rows_list,
-                                      self._jac_cols_list, self._y_nz)
-                run = load_kernel(src, self.size_in, self.size_out) if src else None
+            guarded = self._guard.active
+            src = centered_source(g, self._g_widen, self.size_in, self._out_pos,
+                                  self.size_out, self._jac_rows_list, self._jac_cols_list,
+                                  self._y_nz, with_natural=guarded)
+            sizes = list(self.size_out) * (2 if guarded else 1)
+            run = load_kernel(src, self.size_in, sizes) if src else None
             if run is not None:
-                self._native = ("fused", run)
+                self._native = ("fused_guarded" if guarded else "fused", run)
             else:
                 pos = [np.asarray(g.sparsity_out(i).find(), dtype=np.intp)
                        for i in range(g.n_out())]

@@ -172,7 +172,7 @@ def test_native_centered_form_encloses_the_exact_value_and_matches_numpy(n, ops,
     X, U = _boxes(rng, 30, n, 0.05), _boxes(rng, 30, 1, 0.05)
     Fn = InclusionFunction(f, "centered", backend="native")
     a = Fn(X, U)[0]
-    assert Fn._native and Fn._native[0] in ("fused", "g")
+    assert Fn._native and Fn._native[0] in ("fused", "fused_guarded", "g")
     b = InclusionFunction(f, "centered", backend="numpy")(X, U)[0]
     for k in range(0, 30, 3):
         for t in (0.0, 0.61, 1.0):
@@ -200,3 +200,27 @@ def test_fused_centered_kernel_is_bit_identical_on_a_polynomial_model():
     assert Fn._native[0] == "fused"
     np.testing.assert_array_equal(a, InclusionFunction(m.function, "centered",
                                                        backend="numpy")(X, U, W)[0])
+
+
+def test_fused_centered_kernel_with_a_jump_guard_uses_the_natural_enclosure_there():
+    """x / y and log(y) leave their domain on boxes that reach y = 0: there the guard makes
+    the row natural ([-inf, inf]); elsewhere the mean-value form holds the exact values."""
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("q", [x], [ca.vertcat(x[0] / x[1] + x[0] ** 2, ca.log(x[1]) * x[0])])
+    rng = np.random.default_rng(11)
+    c = np.column_stack([rng.uniform(-1, 1, 200), rng.uniform(-0.3, 2, 200)])
+    X = np.stack([c - 0.05, c + 0.05], -1)
+    Fn = InclusionFunction(f, "centered", backend="native")
+    a = Fn(X)[0]
+    assert Fn._native[0] == "fused_guarded"
+    b = InclusionFunction(f, "centered", backend="numpy")(X)[0]
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+    holds0 = (X[:, 1, 0] <= 0) & (X[:, 1, 1] >= 0)  # x / y undefined somewhere on the box
+    reach = X[:, 1, 0] <= 0  # log y undefined somewhere on the box
+    assert holds0.any() and np.isinf(a[holds0, 0]).all() and np.isinf(a[reach, 1]).all()
+    for k in np.flatnonzero(~reach)[:40]:
+        for t in (0.0, 0.5, 1.0):
+            p = X[k, :, 0] + t * (X[k, :, 1] - X[k, :, 0])
+            ref = eval_function(f, [list(p)])[0]
+            for j in range(2):
+                assert inside(a[k, j, 0], a[k, j, 1], ref[j])
