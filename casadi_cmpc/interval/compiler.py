@@ -496,6 +496,7 @@ class InclusionFunction:
     scalar_max_batch: int = 32
     scalar_max_batch_centered: int = 16
     native_after: int = 16
+    native_large: int = 200
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
                  backend: str = "auto", derived_outputs: Sequence[int] = (),
@@ -557,6 +558,9 @@ class InclusionFunction:
         self._is_natural = self._natural_form()
         self._native: Any = None  # the native kernel; False: not available
         self._native_batches = 0  # batches evaluated so far by numpy (auto: when to compile)
+        n_instr = self.fun.n_instructions() + (
+            self._g.n_instructions() if not self._is_natural else 0)
+        self._large = n_instr >= self.native_large  # small batches gain from native too
 
     # ---------------------------------------------------------------- natural
     def _inputs(self, args: Sequence[Any]) -> tuple[list[np.ndarray], int]:
@@ -759,7 +763,7 @@ class InclusionFunction:
             return self._centered_impl(boxes, n)
 
     def _centered_impl(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
-        native = self._centered_native() if self._wants_native(n) else None
+        native = self._centered_native() if self._native_ready() else None
         if native is not None and native[0] == "fused":
             return native[1](boxes, n)
         if native is not None and native[0] == "fused_guarded":
@@ -1117,14 +1121,17 @@ class InclusionFunction:
         For solvers that build their own box batches; no shape or NaN checks are made. The
         backend is chosen as for a call (see the class Notes).
         """
-        # once compiled, the native kernel takes small batches too (its call costs a few
-        # µs; the scalar evaluator costs about 0.1 µs per box and instruction)
-        if 0 < n <= self._scalar_limit() and not self._native:
-            return self._run_scalar([b.tolist() for b in boxes], n, boxes)
-        if n and self._is_natural and self._wants_native(n):
+        small = 0 < n <= self._scalar_limit()
+        # a small batch goes to the native kernel only for a large function (its call costs
+        # a few µs; the scalar evaluator about 0.1 µs per box and instruction)
+        if n and (self._large or not small) and self._wants_native(n):
+            if not self._is_natural:
+                return self._numpy(boxes, n)  # the centered form takes its native kernel
             run = self._native_kernel()
             if run is not None:
                 return run(boxes, n)
+        if small:
+            return self._run_scalar([b.tolist() for b in boxes], n, boxes)
         return self._numpy(boxes, n)
 
     def _wants_native(self, n: int) -> bool:
@@ -1165,6 +1172,13 @@ class InclusionFunction:
                                   [g.numel_out(i) for i in range(g.n_out())])
                 self._native = ("g", (k, pos)) if k is not None else False
         return self._native or None
+
+    def _native_ready(self) -> bool:
+        """The native kernel is (to be) used: forced, or past the auto threshold."""
+        if self.backend == "native":
+            return True
+        return (self.backend == "auto" and self._native is not False
+                and self._native_batches > self.native_after)
 
     def _g_native_eval(self, mids: list[np.ndarray], il: list[np.ndarray],
                        ih: list[np.ndarray], n: int) -> list[list[Any]] | None:
