@@ -9,6 +9,10 @@ Prints one JSON line:
   set searches), µs per call, native against numpy.
 * ``call_n1``: one natural call at N = 1 on the 2-state cannon model (E8), µs, with the
   default backend (the scalar evaluator at this size) and with the native one.
+* ``one_step_3state``: ``one_step_set`` on a 3-state model at eps 0.05 against the naive grid
+  (one cell per eps-box, one transition per cell and control value on 17 values, the same
+  centered inclusion, cells certified once skipped): pairs per second and certified volume
+  of each. The grid is the benchmark's reference, not a library feature.
 * ``e9_sequence``: the E9 robust controllable sequence at eps 0.05, seconds with numpy forced
   against the default backend (native once a function is called repeatedly), and whether
   the sets are identical.
@@ -107,6 +111,40 @@ def call_n1() -> dict:
             "native_us": per_call(lambda: nat(*args)) * 1e6}
 
 
+def one_step_3state() -> dict:
+    import casadi as ca
+
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * (u + 0.5 * ca.sin(x[0]) + 0.2 * x[2]),
+                   0.7 * x[2] + 0.1 * x[0] ** 2 + 0.1 * x[1])
+    m = cm.Model(x=x, u=u, f=f, X=cm.Box([-1] * 3, [1] * 3), U=cm.Box([-2], [2]))
+    T = cm.Polytope.from_box(cm.Box([-0.4] * 3, [0.4] * 3))
+    eps = 0.05
+    t0 = time.perf_counter()
+    K = cm.one_step_set(m, T, eps, progress=False)
+    t_ours = time.perf_counter() - t0
+    k = int(round(2 / eps))
+    edges = np.linspace(-1, 1, k + 1)
+    lo = np.stack(np.meshgrid(edges[:-1], edges[:-1], edges[:-1], indexing="ij"),
+                  -1).reshape(-1, 3)
+    cells = np.stack([lo, lo + 2 / k], -1)
+    F = InclusionFunction(m.function, "centered")
+    t0 = time.perf_counter()
+    ok = np.zeros(len(cells), dtype=bool)
+    pairs = 0
+    for uv in np.linspace(-2, 2, 17):
+        todo = np.flatnonzero(~ok)
+        Y = F(cells[todo], np.array([[[uv, uv]]]), np.zeros((1, 0, 2)))[0]
+        pairs += todo.size
+        ok[todo] |= ((Y[:, :, 0] >= -0.4) & (Y[:, :, 1] <= 0.4)).all(axis=1)
+    t_grid = time.perf_counter() - t0
+    return {"ours_s": t_ours, "ours_pairs_per_s": K.n_pairs / t_ours,
+            "ours_volume": float(K.paving.volume()), "grid_s": t_grid,
+            "grid_pairs_per_s": pairs / t_grid, "grid_volume": float(ok.sum() * (2 / k) ** 3),
+            "pairs_per_s_ours_over_grid": (K.n_pairs / t_ours) / (pairs / t_grid)}
+
+
 def e9_sequence() -> dict:
     ex = cm.models.load("cannon_robust")
 
@@ -135,7 +173,7 @@ def main() -> dict:
         return {"error": "no C compiler: the native backend is not available"}
     res = {"machine": platform.machine(), "cpus": os.cpu_count(),
            "inclusion_1e5": inclusion_1e5(), "batch_300": batch_300(), "call_n1": call_n1(),
-           "e9_sequence": e9_sequence()}
+           "one_step_3state": one_step_3state(), "e9_sequence": e9_sequence()}
     return res
 
 
