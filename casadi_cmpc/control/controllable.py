@@ -60,14 +60,15 @@ def _flatten(target: Any) -> list[Any]:
 def _rows_inclusion(model: Model, rows: int) -> Any:
     """The centered inclusion of ``H f(x, u, w)`` with H (rows, n) an input: one per model and
     number of rows, so that the targets of every level of a sequence (and every call) share
-    its compiled evaluators (numpy, scalar and native) instead of compiling new ones."""
+    its compiled evaluators (numpy, scalar and native) instead of compiling new ones. H is
+    always a point: no derivative is taken with respect to it (``thin_inputs``)."""
     cache = model.__dict__.setdefault("_rows_inclusions", {})
     F = cache.get(rows)
     if F is None:
         H = ca.SX.sym("H", rows, model.n)
         fun = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
                           [ca.mtimes(H, model.f)])
-        F = cache[rows] = InclusionFunction(fun, "centered")
+        F = cache[rows] = InclusionFunction(fun, "centered", thin_inputs=(3,))
     return F
 
 

@@ -270,9 +270,15 @@ static inline civ civ_sub(civ a, civ b) {
 static inline civ civ_neg(civ a) { return civ_make(-a.hi, -a.lo); }
 static inline civ civ_twice(civ a) { return civ_add(a, a); }
 
+static inline civ civ_mulc(civ a, double c);
+
 static inline civ civ_mul(civ a, civ b) {
-    double p1 = a.lo * b.lo, p2 = a.lo * b.hi, p3 = a.hi * b.lo, p4 = a.hi * b.hi;
-    double t = p1 + p2 + p3 + p4; /* NaN when a product is NaN (or infinities cancel) */
+    double p1, p2, p3, p4, t;
+    /* a point operand (e.g. a row of a target matrix given as an input): two products */
+    if (b.lo == b.hi && b.lo != 0.0 && fabs(b.lo) <= DBL_MAX) return civ_mulc(a, b.lo);
+    if (a.lo == a.hi && a.lo != 0.0 && fabs(a.lo) <= DBL_MAX) return civ_mulc(b, a.lo);
+    p1 = a.lo * b.lo; p2 = a.lo * b.hi; p3 = a.hi * b.lo; p4 = a.hi * b.hi;
+    t = p1 + p2 + p3 + p4; /* NaN when a product is NaN (or infinities cancel) */
     if (t != t) return civ_nan();
     return civ_make(civ_dn(civ_min(civ_min(p1, p2), civ_min(p3, p4))),
                     civ_up(civ_max(civ_max(p1, p2), civ_max(p3, p4))));
