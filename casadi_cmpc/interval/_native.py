@@ -13,6 +13,8 @@ by a hash of its source and of the compiler command (``$XDG_CACHE_HOME/casadi_cm
 default ``~/.cache/casadi_cmpc/kernels``). Without a compiler, or for a Function with an
 operation the C rules lack, :func:`native_kernel` returns None and the caller evaluates with
 numpy (one :class:`~casadi_cmpc.CmpcWarning` per process says that no compiler was found).
+``CMPC_NATIVE=0`` in the environment turns the backend off (every evaluation then is that of
+numpy or of the scalar evaluator, bit for bit reproducible from run to run).
 """
 
 from __future__ import annotations
@@ -65,9 +67,15 @@ def _compiler() -> str | None:
         return _state["cc"]
 
 
+def native_disabled() -> bool:
+    """Whether ``CMPC_NATIVE=0`` turns the native backend off."""
+    return os.environ.get("CMPC_NATIVE", "1").strip() == "0"
+
+
 def native_available() -> bool:
-    """Whether a C compiler was found for the native backend."""
-    return sys.platform != "win32" and _compiler() is not None
+    """Whether the native backend can run: a C compiler was found and ``CMPC_NATIVE`` is
+    not ``0``."""
+    return not native_disabled() and sys.platform != "win32" and _compiler() is not None
 
 
 def _warn_once(msg: str) -> None:
@@ -344,8 +352,10 @@ def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray]
     on validated ``(N_i, d_i, 2)`` float64 inputs (N_i in {1, n}); None when no compiler is
     found (one warning per process) or an operation has no C rule."""
     if not native_available():
-        _warn_once("no C compiler found (set $CC, or install cc/gcc/clang): the inclusion "
-                   "functions evaluate large batches with numpy, several times slower")
+        if not native_disabled():
+            _warn_once("no C compiler found (set $CC, or install cc/gcc/clang): the "
+                       "inclusion functions evaluate large batches with numpy, several "
+                       "times slower")
         return None
     src = kernel_source(fun, widen, out_pos, size_out, keep_outputs)
     if src is None:

@@ -280,3 +280,16 @@ def test_thin_inputs_take_no_derivative_and_must_be_points():
             thin(X, U, Hb + np.array([0.0, 1e-9]))
     with pytest.raises(ValueError, match="not inputs"):
         InclusionFunction(fun, "centered", thin_inputs=(3,))
+
+
+def test_cmpc_native_0_turns_the_backend_off_without_a_warning(monkeypatch):
+    monkeypatch.setenv("CMPC_NATIVE", "0")
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("off", [x], [ca.exp(x[0]) * x[1]])
+    X = np.tile(np.array([[[0.1, 0.2], [1.0, 1.5]]]), (64, 1, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        F = InclusionFunction(f, backend="native")
+        a = F(X)[0]
+    assert F._native is False
+    np.testing.assert_array_equal(a, InclusionFunction(f, backend="numpy")(X)[0])
