@@ -57,18 +57,29 @@ def _flatten(target: Any) -> list[Any]:
                     f"Zonotope, Box, SetUnion or a list of them; got {type(target).__name__}")
 
 
-def _rows_inclusion(model: Model, rows: int) -> Any:
-    """The centered inclusion of ``H f(x, u, w)`` with H (rows, n) an input: one per model and
-    number of rows, so that the targets of every level of a sequence (and every call) share
-    its compiled evaluators (numpy, scalar and native) instead of compiling new ones. H is
-    always a point: no derivative is taken with respect to it (``thin_inputs``)."""
-    cache = model.__dict__.setdefault("_rows_inclusions", {})
-    F = cache.get(rows)
+def _rows_inclusion(model: Model, A: np.ndarray) -> Any:
+    """The centered inclusion of the target rows ``A f(x, u, w)``, A read as exact constants
+    (a :class:`~casadi_cmpc.interval._derivative.ParamFunction` over ``H f`` with H a
+    symbol: CasADi folds nothing of A while composing, the compiler folds it exactly). One
+    per model and matrix, kept for the last 64 matrices, so that the targets of every level
+    of a sequence (and every call) share its compiled evaluators (numpy, scalar, native)."""
+    from collections import OrderedDict
+
+    from ..interval._derivative import ParamFunction
+
+    cache = model.__dict__.setdefault("_rows_inclusions", OrderedDict())
+    key = (A.shape, A.tobytes())
+    F = cache.get(key)
     if F is None:
-        H = ca.SX.sym("H", rows, model.n)
-        fun = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
-                          [ca.mtimes(H, model.f)])
-        F = cache[rows] = InclusionFunction(fun, "centered", thin_inputs=(3,))
+        H = ca.SX.sym("H", A.shape[0], model.n)
+        g = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
+                        [ca.mtimes(H, model.f)])
+        F = cache[key] = InclusionFunction(ParamFunction(g, 3, A.ravel(order="F")),
+                                           "centered")
+        while len(cache) > 64:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
     return F
 
 
@@ -76,7 +87,7 @@ class _Target:
     """Proven tests of ``f(X, U, W) ⊆ T`` and ``f(X, U, W) ∩ T = ∅`` for batches of boxes.
 
     Polytope members are tested through the rows composed with f, ``H f(x, u, w) <= h``,
-    enclosed by the centered form (H enters as a thin input, so no constant is folded);
+    enclosed by the centered form (H enters as exact constants, so nothing is rounded);
     box unions and zonotopes through the interval hull of the successor.
     """
 
@@ -87,7 +98,7 @@ class _Target:
             if S.dim != n:
                 raise DimensionError(f"the target has dimension {S.dim}; the model has n = {n}")
         self.model = model
-        self.polys: list[tuple[Any, np.ndarray, np.ndarray]] = []
+        self.polys: list[tuple[Any, None, np.ndarray]] = []
         boxes = []
         self.zonos: list[Zonotope] = []
         for S in members:
@@ -95,9 +106,7 @@ class _Target:
                 if S.is_empty():
                     continue
                 A, b = np.asarray(S.A, dtype=float), np.asarray(S.b, dtype=float)
-                Hb = A.ravel(order="F")
-                self.polys.append((_rows_inclusion(model, A.shape[0]),
-                                   np.stack([Hb, Hb], axis=-1)[None], b))
+                self.polys.append((_rows_inclusion(model, A), None, b))
             elif isinstance(S, Paving):
                 if S.inner.shape[0]:
                     boxes.append(S.inner)
@@ -110,8 +119,8 @@ class _Target:
     def _rows(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> list[np.ndarray]:
         N = X.shape[0]
         out = []
-        for F, Hb, _ in self.polys:
-            out.append(F.evaluate_unchecked([X, U, W, Hb], N)[0])
+        for F, _, _ in self.polys:
+            out.append(F.evaluate_unchecked([X, U, W], N)[0])
         return out
 
     def _hull(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
