@@ -422,11 +422,6 @@ class InclusionFunction:
         See :func:`inclusion`.
     backend : {"auto", "numpy", "scalar", "native"}
         Evaluator of the boxes (see Notes).
-    thin_inputs : sequence of int, optional
-        Inputs that are always points (thin boxes, e.g. the rows H of a target
-        ``H f(x, u, w)``): the centered form takes no derivative with respect to them (their
-        radius is 0, so those terms of the mean-value form vanish; the Jacobian graph and
-        its kernel are smaller). A call with a non-thin box for one raises ValueError.
     derived_outputs, evaluate : internal
         Restricted forms for derivative graphs: outputs whose constants were folded by
         CasADi (widened), and the outputs to evaluate.
@@ -505,8 +500,7 @@ class InclusionFunction:
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
                  backend: str = "auto", derived_outputs: Sequence[int] = (),
-                 evaluate: Sequence[int] | None = None,
-                 thin_inputs: Sequence[int] = ()) -> None:
+                 evaluate: Sequence[int] | None = None) -> None:
         kind = str(kind).lower()
         if kind not in _KINDS:
             raise ValueError(f"unknown inclusion kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
@@ -529,10 +523,6 @@ class InclusionFunction:
             self._keep = None
         self.fun = fun
         self.kind = kind
-        self.thin_inputs = tuple(sorted({int(i) for i in thin_inputs}))
-        if any(not 0 <= i < fun.n_in() for i in self.thin_inputs):
-            raise ValueError(f"thin_inputs {list(thin_inputs)} are not inputs of "
-                             f"'{fun.name()}' (it has {fun.n_in()})")
         outs = list(range(fun.n_out())) if self._keep is None else list(self._keep)
         self.n_in = fun.n_in()
         self.n_out = len(outs)
@@ -741,12 +731,7 @@ class InclusionFunction:
         fp = ca.Function(f"{f.name()}_p", zb + [graph.params], graph.outputs)
         outs_m = fp.call(zm + [graph.params])
         outs_b = graph.outputs
-        # no derivative with respect to the thin inputs (their terms vanish): the columns of
-        # the Jacobian are the coordinates of the other inputs, mapped back to the joint
-        # coordinates of all inputs below
-        free = [i for i in range(self.n_in) if i not in self.thin_inputs]
-        z = ca.vertcat(*[ca.vec(zb[i]) for i in free])
-        col_of = [sum(self.size_in[:i]) + j for i in free for j in range(self.size_in[i])]
+        z = ca.vertcat(*[ca.vec(s) for s in zb])
         y = ca.vertcat(*[ca.vec(o) for o in outs_b])
         jac = ca.jacobian(y, z)
         g = graph.function(f"{f.name()}_centered", zm + zb, list(outs_m) + [jac] + list(outs_b))
@@ -757,7 +742,6 @@ class InclusionFunction:
         self._g_scalar_fn: Callable[..., list[list[Any]]] | None = None
         self._guard_fn: Callable[..., list[list[Any]]] | None = None
         rows, cols = jac.sparsity().get_triplet()
-        cols = [col_of[int(c)] for c in cols]
         # row offsets of each output inside y, and nonzero rows of each output
         self._jac_rows = np.asarray(rows, dtype=np.intp)
         self._jac_cols = np.asarray(cols, dtype=np.intp)
@@ -863,7 +847,7 @@ class InclusionFunction:
     def __call__(self, *args: Any) -> list[np.ndarray]:
         """Enclosures over the boxes ``args`` (one ``(N, d_i, 2)`` or ``(d_i, 2)`` array, or
         Box, per input); a list of ``(N, d_o, 2)`` arrays, one per output."""
-        limit = self._scalar_limit() if not self.thin_inputs else 0
+        limit = self._scalar_limit()
         if limit:
             fast = self._fast
             if fast is None:
@@ -879,7 +863,7 @@ class InclusionFunction:
         valid boxes, a batch of at most the backend's limit), else None; for wrappers that
         validate their arguments themselves on the other path (see :meth:`_make_fast`)."""
         limit = self._scalar_limit()
-        if not limit or self.thin_inputs:
+        if not limit:
             return None
         fast = self._fast
         if fast is None:
@@ -1137,11 +1121,6 @@ class InclusionFunction:
         For solvers that build their own box batches; no shape or NaN checks are made. The
         backend is chosen as for a call (see the class Notes).
         """
-        for i in self.thin_inputs:
-            b = boxes[i]
-            if not np.array_equal(b[..., 0], b[..., 1]):
-                raise ValueError(f"input {i} of '{self.fun.name()}' is declared thin "
-                                 "(thin_inputs) but a box of it is not a point")
         small = 0 < n <= self._scalar_limit()
         # a small batch goes to the native kernel only for a large function (its call costs
         # a few µs; the scalar evaluator about 0.1 µs per box and instruction)

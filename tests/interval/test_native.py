@@ -249,39 +249,6 @@ def test_a_large_function_called_box_by_box_moves_to_native():
         assert inside(a[0, j, 0], a[0, j, 1], pt[j])
 
 
-def test_thin_inputs_take_no_derivative_and_must_be_points():
-    """A target's rows H f(x, u) with H a point: the centered form without derivatives in H
-    encloses the same values (H's terms vanish), and a non-point H is refused."""
-    x = ca.SX.sym("x", 2)
-    u = ca.SX.sym("u")
-    H = ca.SX.sym("H", 3, 2)
-    f = ca.vertcat(x[0] + 0.1 * ca.sin(x[1]) * u, x[1] - 0.2 * x[0] * x[0] + u)
-    fun = ca.Function("rows", [x, u, H], [ca.mtimes(H, f)])
-    A = np.array([[1.0, 0.5], [-0.3, 1.0], [2.0, -1.0]])
-    Hb = np.stack([A.ravel(order="F")] * 2, -1)[None]
-    rng = np.random.default_rng(4)
-    c = rng.uniform(-1, 1, (60, 2))
-    X = np.stack([c - 0.05, c + 0.05], -1)
-    U = np.stack([np.full((60, 1), -0.1), np.full((60, 1), 0.2)], -1)
-    for backend in ("numpy", "native"):
-        thin = InclusionFunction(fun, "centered", backend=backend, thin_inputs=(2,))
-        full = InclusionFunction(fun, "centered", backend=backend)
-        assert len(thin._jac_rows) < len(full._jac_rows)
-        a = thin(X, U, Hb)[0]
-        b = full(X, U, Hb)[0]
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
-        for k in range(0, 60, 6):
-            for t in (0.0, 0.4, 1.0):
-                p = X[k, :, 0] + t * (X[k, :, 1] - X[k, :, 0])
-                ref = eval_function(fun, [list(p), [U[k, 0, 1]], list(A.ravel(order="F"))])[0]
-                for j in range(3):
-                    assert inside(a[k, j, 0], a[k, j, 1], ref[j])
-        with pytest.raises(ValueError, match="declared thin"):
-            thin(X, U, Hb + np.array([0.0, 1e-9]))
-    with pytest.raises(ValueError, match="not inputs"):
-        InclusionFunction(fun, "centered", thin_inputs=(3,))
-
-
 def test_cmpc_native_0_turns_the_backend_off_without_a_warning(monkeypatch):
     monkeypatch.setenv("CMPC_NATIVE", "0")
     x = ca.SX.sym("x", 2)
