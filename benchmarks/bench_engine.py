@@ -31,19 +31,11 @@ import numpy as np
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+from _timing import median_time  # noqa: E402
+
 import casadi_cmpc as cm  # noqa: E402
 from casadi_cmpc.interval import InclusionFunction  # noqa: E402
 from casadi_cmpc.interval._native import native_available  # noqa: E402
-
-
-def _median_time(fn, reps: int = 15) -> float:
-    fn()
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
 
 
 def _cstr_boxes(model: cm.Model, N: int, seed: int = 0) -> tuple:
@@ -63,9 +55,9 @@ def inclusion_1e5() -> dict:
     pts = f.map(100_000)
     xm = 0.5 * (args[0][..., 0] + args[0][..., 1])
     um = 0.5 * (args[1][..., 0] + args[1][..., 1])
-    t_nat = _median_time(lambda: nat(*args), 7)
-    t_num = _median_time(lambda: num(*args), 7)
-    t_pt = _median_time(lambda: pts(xm.T, um.T, np.zeros((0, 100_000))), 7)
+    t_nat = median_time(lambda: nat(*args), 7)
+    t_num = median_time(lambda: num(*args), 7)
+    t_pt = median_time(lambda: pts(xm.T, um.T, np.zeros((0, 100_000))), 7)
     out = {"native_boxes_per_s": 1e5 / t_nat, "numpy_boxes_per_s": 1e5 / t_num,
            "casadi_points_per_s": 1e5 / t_pt, "native_over_numpy": t_num / t_nat,
            "native_cost_over_casadi_point": t_nat / t_pt}
@@ -84,7 +76,7 @@ def batch_300() -> dict:
     for kind in ("natural", "centered"):
         nat = InclusionFunction(m.function, kind, backend="native")
         num = InclusionFunction(m.function, kind, backend="numpy")
-        a, b = _median_time(lambda f=nat: f(*args), 40), _median_time(lambda f=num: f(*args), 40)
+        a, b = median_time(lambda f=nat: f(*args), 40), median_time(lambda f=num: f(*args), 40)
         res[kind] = {"native_us": a * 1e6, "numpy_us": b * 1e6, "numpy_over_native": b / a}
     return res
 

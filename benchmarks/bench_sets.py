@@ -19,20 +19,13 @@ import sys
 import time
 
 import numpy as np
+from _timing import median_time as _timeit
 
 import casadi_cmpc as cm
 
 TIME_LIMIT = 60.0
 
 
-def _timeit(fn, reps: int = 5) -> float:
-    fn()
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
 
 
 def random_polytope(n: int, k: int, seed: int) -> cm.Polytope:
