@@ -196,6 +196,7 @@ def interval_function(fun: ca.Function, name: str) -> str:
 
 
 PRELUDE = r"""
+#include <string.h>
 /* ------------------------------------------------ interval arithmetic, outward rounded */
 /* An interval civ {lo, hi} holds every real its operation can take on its operands; NaN
  * (both bounds) means "possibly undefined". +,-,*,/,sqrt move each rounded bound outward by
@@ -210,6 +211,15 @@ PRELUDE = r"""
 
 typedef struct { double lo, hi; } civ;
 
+/* every rule inlined where it is used (a compiler then runs a batch loop in SIMD lanes) */
+#ifndef CIV_INLINE
+#if defined(__GNUC__) || defined(__clang__)
+#define CIV_INLINE static inline __attribute__((always_inline))
+#else
+#define CIV_INLINE static inline
+#endif
+#endif
+
 #define CIV_RL 0x1p-44
 #define CIV_AL 0x1p-1060
 #define CIV_TINY 0x1p-1074
@@ -223,158 +233,217 @@ typedef struct { double lo, hi; } civ;
  * 2^-1074 is the spacing of the subnormals). The exact result of one rounded operation lies
  * within one ulp of v, so the moved bound holds it. An overflowed lower bound (+inf) is a
  * finite real above the largest float: it becomes DBL_MAX first (-inf as an upper bound
- * -DBL_MAX). NaN stays NaN, -inf (+inf) stays as a lower (upper) bound. */
-static inline double civ_dn(double v) {
-    if (v > DBL_MAX) v = DBL_MAX;
+ * -DBL_MAX). NaN stays NaN, -inf (+inf) stays as a lower (upper) bound.
+ * The rules of + - * / sqrt fabs sq exp fmin fmax are written without branches (selects),
+ * so that a compiler can run one rule on several boxes at once (SIMD). */
+CIV_INLINE double civ_dn(double v) {
+    v = v > DBL_MAX ? DBL_MAX : v;
     return v - (fabs(v) * 0x1p-52 + CIV_TINY);
 }
 
-static inline double civ_up(double v) {
-    if (v < -DBL_MAX) v = -DBL_MAX;
+CIV_INLINE double civ_up(double v) {
+    v = v < -DBL_MAX ? -DBL_MAX : v;
     return v + (fabs(v) * 0x1p-52 + CIV_TINY);
 }
 
 /* a libm result as a lower / upper bound (an overflowed lower bound is a huge finite value) */
-static inline double civ_dnf(double v) {
-    if (v > DBL_MAX) v = DBL_MAX;
+CIV_INLINE double civ_dnf(double v) {
+    v = v > DBL_MAX ? DBL_MAX : v;
     return civ_dn(v - (fabs(v) * CIV_RL + CIV_AL));
 }
 
-static inline double civ_upf(double v) {
-    if (v < -DBL_MAX) v = -DBL_MAX;
+CIV_INLINE double civ_upf(double v) {
+    v = v < -DBL_MAX ? -DBL_MAX : v;
     return civ_up(v + (fabs(v) * CIV_RL + CIV_AL));
 }
 
-static inline civ civ_make(double lo, double hi) {
+CIV_INLINE civ civ_make(double lo, double hi) {
     civ r;
-    if (!(lo <= hi)) lo = hi = NAN; /* also a NaN bound: both sides NaN */
-    r.lo = lo;
-    r.hi = hi;
+    r.lo = lo <= hi ? lo : NAN; /* false also for a NaN bound: both sides NaN */
+    r.hi = lo <= hi ? hi : NAN;
     return r;
 }
 
-static inline civ civ_nan(void) { return civ_make(NAN, NAN); }
-static inline int civ_isnan(civ a) { return a.lo != a.lo || a.hi != a.hi; }
-static inline double civ_min(double a, double b) { return a < b ? a : b; }
-static inline double civ_max(double a, double b) { return a > b ? a : b; }
+CIV_INLINE civ civ_nan(void) { return civ_make(NAN, NAN); }
+CIV_INLINE int civ_isnan(civ a) { return a.lo != a.lo || a.hi != a.hi; }
+CIV_INLINE double civ_min(double a, double b) { return a < b ? a : b; }
+CIV_INLINE double civ_max(double a, double b) { return a > b ? a : b; }
+/* min, max that are NaN when an operand is */
+CIV_INLINE double civ_minn(double a, double b) {
+    double m = a < b ? a : b; /* b where unordered */
+    return a != a ? a : m;
+}
+CIV_INLINE double civ_maxn(double a, double b) {
+    double m = a > b ? a : b;
+    return a != a ? a : m;
+}
+/* v, or NaN where the interval b holds 0 (a divisor) */
+CIV_INLINE double civ_nz(civ b, double v) {
+    return civ_max(b.lo, -b.hi) > 0.0 ? v : NAN; /* b.lo > 0 or b.hi < 0 */
+}
 
 /* ---- arithmetic */
-static inline civ civ_add(civ a, civ b) {
+CIV_INLINE civ civ_add(civ a, civ b) {
     return civ_make(civ_dn(a.lo + b.lo), civ_up(a.hi + b.hi));
 }
 
-static inline civ civ_sub(civ a, civ b) {
+CIV_INLINE civ civ_sub(civ a, civ b) {
     return civ_make(civ_dn(a.lo - b.hi), civ_up(a.hi - b.lo));
 }
 
-static inline civ civ_neg(civ a) { return civ_make(-a.hi, -a.lo); }
-static inline civ civ_twice(civ a) { return civ_add(a, a); }
+CIV_INLINE civ civ_neg(civ a) { return civ_make(-a.hi, -a.lo); }
+CIV_INLINE civ civ_twice(civ a) { return civ_add(a, a); }
 
-static inline civ civ_mulc(civ a, double c);
-
-static inline civ civ_mul(civ a, civ b) {
-    double p1, p2, p3, p4, t;
-    /* a point operand (e.g. a row of a target matrix given as an input): two products */
-    if (b.lo == b.hi && b.lo != 0.0 && fabs(b.lo) <= DBL_MAX) return civ_mulc(a, b.lo);
-    if (a.lo == a.hi && a.lo != 0.0 && fabs(a.lo) <= DBL_MAX) return civ_mulc(b, a.lo);
-    p1 = a.lo * b.lo; p2 = a.lo * b.hi; p3 = a.hi * b.lo; p4 = a.hi * b.hi;
-    t = p1 + p2 + p3 + p4; /* NaN when a product is NaN (or infinities cancel) */
-    if (t != t) return civ_nan();
+/* a * b: NaN when a product is NaN (0 times an infinite bound) */
+CIV_INLINE civ civ_mul(civ a, civ b) {
+    double p1 = a.lo * b.lo, p2 = a.lo * b.hi, p3 = a.hi * b.lo, p4 = a.hi * b.hi;
     return civ_make(civ_dn(civ_min(civ_min(p1, p2), civ_min(p3, p4))),
-                    civ_up(civ_max(civ_max(p1, p2), civ_max(p3, p4))));
+                    civ_up(civ_maxn(civ_maxn(p1, p2), civ_maxn(p3, p4))));
 }
 
-/* a * c for a finite constant c (the sign test is resolved when compiled) */
-static inline civ civ_mulc(civ a, double c) {
-    if (c > 0.0) return civ_make(civ_dn(a.lo * c), civ_up(a.hi * c));
-    if (c < 0.0) return civ_make(civ_dn(a.hi * c), civ_up(a.lo * c));
-    return civ_isnan(a) ? a : civ_make(0.0, 0.0); /* 0 x = 0 for every real x */
+/* a * c for a finite constant c: civ_mul with two products (the sign tests are resolved
+ * when compiled; 0 x = 0 for every real x) */
+CIV_INLINE civ civ_mulc(civ a, double c) {
+    civ p = civ_make(civ_dn(a.lo * c), civ_up(a.hi * c));
+    civ n = civ_make(civ_dn(a.hi * c), civ_up(a.lo * c));
+    civ z = civ_make(a.lo != a.lo ? NAN : 0.0, a.hi != a.hi ? NAN : 0.0);
+    return c > 0.0 ? p : (c < 0.0 ? n : z);
 }
 
-static inline civ civ_div(civ a, civ b) {
-    double p1, p2, p3, p4;
-    if (!(b.lo > 0.0 || b.hi < 0.0) || civ_isnan(a)) return civ_nan();
-    p1 = a.lo / b.lo; p2 = a.lo / b.hi; p3 = a.hi / b.lo; p4 = a.hi / b.hi;
-    if (p1 != p1 || p2 != p2 || p3 != p3 || p4 != p4) return civ_nan();
+/* a / b: NaN where b holds 0 or a quotient is NaN */
+CIV_INLINE civ civ_div(civ a, civ b) {
+    double p1 = a.lo / b.lo, p2 = a.lo / b.hi, p3 = a.hi / b.lo, p4 = a.hi / b.hi;
     return civ_make(civ_dn(civ_min(civ_min(p1, p2), civ_min(p3, p4))),
-                    civ_up(civ_max(civ_max(p1, p2), civ_max(p3, p4))));
+                    civ_nz(b, civ_up(civ_maxn(civ_maxn(p1, p2), civ_maxn(p3, p4)))));
 }
 
-static inline civ civ_inv(civ a) { return civ_div(civ_make(1.0, 1.0), a); }
+/* a / c for a finite non-zero constant c: civ_div with two quotients (the same bounds) */
+CIV_INLINE civ civ_divc(civ a, double c) {
+    double p1 = a.lo / c, p3 = a.hi / c;
+    return civ_make(civ_dn(civ_min(p1, p3)), civ_up(civ_maxn(p1, p3)));
+}
+
+/* c / b for a constant c (not NaN): civ_div with two quotients (the same bounds) */
+CIV_INLINE civ civ_cdiv(double c, civ b) {
+    double p1 = c / b.lo, p2 = c / b.hi;
+    return civ_make(civ_dn(civ_min(p1, p2)), civ_nz(b, civ_up(civ_maxn(p1, p2))));
+}
+
+CIV_INLINE civ civ_inv(civ a) { return civ_cdiv(1.0, a); }
 
 /* |a| as [mignitude, magnitude] */
-static inline civ civ_fabs(civ a) {
-    if (civ_isnan(a)) return a;
-    return civ_make(civ_max(civ_max(a.lo, -a.hi), 0.0), civ_max(-a.lo, a.hi));
+CIV_INLINE civ civ_fabs(civ a) {
+    return civ_make(civ_max(civ_max(a.lo, -a.hi), 0.0), civ_maxn(-a.lo, a.hi));
 }
 
-static inline civ civ_sq(civ a) {
+CIV_INLINE civ civ_sq(civ a) {
     civ m = civ_fabs(a);
-    if (civ_isnan(m)) return m;
     return civ_make(civ_max(civ_dn(m.lo * m.lo), 0.0), civ_up(m.hi * m.hi));
 }
 
-static inline civ civ_sqrt(civ a) {
-    if (!(a.lo >= 0.0) || a.hi != a.hi) return civ_nan();
-    return civ_make(civ_max(civ_dn(sqrt(a.lo)), 0.0), civ_up(sqrt(a.hi)));
+CIV_INLINE civ civ_sqrt(civ a) {
+    return civ_make(a.lo >= 0.0 ? civ_max(civ_dn(sqrt(a.lo)), 0.0) : NAN, civ_up(sqrt(a.hi)));
 }
 
-static inline civ civ_fmin(civ a, civ b) {
-    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
-    return civ_make(civ_min(a.lo, b.lo), civ_min(a.hi, b.hi));
+CIV_INLINE civ civ_fmin(civ a, civ b) {
+    return civ_make(civ_minn(a.lo, b.lo), civ_minn(a.hi, b.hi));
 }
 
-static inline civ civ_fmax(civ a, civ b) {
-    if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
-    return civ_make(civ_max(a.lo, b.lo), civ_max(a.hi, b.hi));
+CIV_INLINE civ civ_fmax(civ a, civ b) {
+    return civ_make(civ_maxn(a.lo, b.lo), civ_maxn(a.hi, b.hi));
 }
 
 /* ---- monotone libm functions: f(lo), f(hi) with the libm margin, clipped to [rlo, rhi] */
-static inline civ civ_inc(double flo, double fhi, double rlo, double rhi) {
-    if (flo != flo || fhi != fhi) return civ_nan();
-    return civ_make(civ_max(civ_dnf(flo), rlo), civ_min(civ_upf(fhi), rhi));
+CIV_INLINE civ civ_inc(double flo, double fhi, double rlo, double rhi) {
+    return civ_make(flo != flo ? NAN : civ_max(civ_dnf(flo), rlo),
+                    fhi != fhi ? NAN : civ_min(civ_upf(fhi), rhi));
 }
 
-static inline civ civ_exp(civ a) { return civ_inc(exp(a.lo), exp(a.hi), 0.0, INFINITY); }
-static inline civ civ_expm1(civ a) {
+/* e^x for -700 <= x <= 709 (NaN for NaN), within 2^-48 relative in every rounding mode, in
+ * straight-line arithmetic (no table, no branch). x = k ln 2 + r with an integer k near
+ * x / ln 2 (|r| <= 0.7 whatever the rounding of the shift), ln 2 split in two parts of
+ * which the first times k is exact; e^r by its Taylor polynomial of degree 17 (remainder
+ * below 2^-61 for |r| <= 0.7), evaluated as 1 + (r + r^2 q(r)); 2^k from the bits of
+ * the shifted product. The callers add the libm margin (2^-44 relative), which covers
+ * these errors with room to spare. */
+CIV_INLINE double civ_exp_core(double x) {
+    double t = x * 0x1.71547652b82fep+0 + 0x1.8p52, k = t - 0x1.8p52;
+    double r = (x - k * 0x1.62e42fee00000p-1) - k * 0x1.a39ef35793c76p-33;
+    double q = 0x1.952c77030ad4ap-49;  /* 1 / 17! */
+    unsigned long long ki, bits;
+    double s;
+    q = q * r + 0x1.ae7f3e733b81fp-45;  /* 1 / 16! */
+    q = q * r + 0x1.ae7f3e733b81fp-41;  /* 1 / 15! */
+    q = q * r + 0x1.93974a8c07c9dp-37;  /* 1 / 14! */
+    q = q * r + 0x1.6124613a86d09p-33;  /* 1 / 13! */
+    q = q * r + 0x1.1eed8eff8d898p-29;  /* 1 / 12! */
+    q = q * r + 0x1.ae64567f544e4p-26;  /* 1 / 11! */
+    q = q * r + 0x1.27e4fb7789f5cp-22;  /* 1 / 10! */
+    q = q * r + 0x1.71de3a556c734p-19;  /* 1 / 9! */
+    q = q * r + 0x1.a01a01a01a01ap-16;  /* 1 / 8! */
+    q = q * r + 0x1.a01a01a01a01ap-13;  /* 1 / 7! */
+    q = q * r + 0x1.6c16c16c16c17p-10;  /* 1 / 6! */
+    q = q * r + 0x1.1111111111111p-7;  /* 1 / 5! */
+    q = q * r + 0x1.5555555555555p-5;  /* 1 / 4! */
+    q = q * r + 0x1.5555555555555p-3;  /* 1 / 3! */
+    q = q * r + 0x1.0000000000000p-1;  /* 1 / 2! */
+    q = 1.0 + (r + (r * r) * q);
+    memcpy(&bits, &t, sizeof bits);
+    ki = bits - 0x4338000000000000ULL;              /* k as an integer, |k| <= 1025 */
+    bits = (ki + 1022) << 52;                       /* 2^(k - 1), a normal float */
+    memcpy(&s, &bits, sizeof s);
+    return (q * s) * 2.0;
+}
+
+/* e^[lo, hi]: below -700 the lower bound is 0 and e^-700 bounds above; above 709 the upper
+ * bound is +inf and e^709 bounds below */
+CIV_INLINE civ civ_exp(civ a) {
+    double xl = a.lo > 709.0 ? 709.0 : a.lo, xh = a.hi < -700.0 ? -700.0 : a.hi;
+    double el = civ_exp_core(xl < -700.0 ? -700.0 : xl);
+    double eh = civ_exp_core(xh > 709.0 ? 709.0 : xh);
+    el = xl < -700.0 ? 0.0 : el;
+    eh = xh > 709.0 ? INFINITY : eh;
+    return civ_inc(el, eh, 0.0, INFINITY);
+}
+CIV_INLINE civ civ_expm1(civ a) {
     return civ_inc(expm1(a.lo), expm1(a.hi), -1.0, INFINITY);
 }
-static inline civ civ_log(civ a) {
+CIV_INLINE civ civ_log(civ a) {
     if (!(a.lo > 0.0)) return civ_nan();
     return civ_inc(log(a.lo), log(a.hi), -INFINITY, INFINITY);
 }
-static inline civ civ_log1p(civ a) {
+CIV_INLINE civ civ_log1p(civ a) {
     if (!(a.lo > -1.0)) return civ_nan();
     return civ_inc(log1p(a.lo), log1p(a.hi), -INFINITY, INFINITY);
 }
-static inline civ civ_atan(civ a) {
+CIV_INLINE civ civ_atan(civ a) {
     return civ_inc(atan(a.lo), atan(a.hi), -CIV_HALF_PI_HI, CIV_HALF_PI_HI);
 }
-static inline civ civ_tanh(civ a) { return civ_inc(tanh(a.lo), tanh(a.hi), -1.0, 1.0); }
-static inline civ civ_erf(civ a) { return civ_inc(erf(a.lo), erf(a.hi), -1.0, 1.0); }
-static inline civ civ_sinh(civ a) {
+CIV_INLINE civ civ_tanh(civ a) { return civ_inc(tanh(a.lo), tanh(a.hi), -1.0, 1.0); }
+CIV_INLINE civ civ_erf(civ a) { return civ_inc(erf(a.lo), erf(a.hi), -1.0, 1.0); }
+CIV_INLINE civ civ_sinh(civ a) {
     return civ_inc(sinh(a.lo), sinh(a.hi), -INFINITY, INFINITY);
 }
-static inline civ civ_asinh(civ a) {
+CIV_INLINE civ civ_asinh(civ a) {
     return civ_inc(asinh(a.lo), asinh(a.hi), -INFINITY, INFINITY);
 }
-static inline civ civ_asin(civ a) {
+CIV_INLINE civ civ_asin(civ a) {
     if (!(a.lo >= -1.0 && a.hi <= 1.0)) return civ_nan();
     return civ_inc(asin(a.lo), asin(a.hi), -CIV_HALF_PI_HI, CIV_HALF_PI_HI);
 }
-static inline civ civ_acos(civ a) { /* decreasing */
+CIV_INLINE civ civ_acos(civ a) { /* decreasing */
     if (!(a.lo >= -1.0 && a.hi <= 1.0)) return civ_nan();
     return civ_inc(acos(a.hi), acos(a.lo), 0.0, CIV_PI_HI);
 }
-static inline civ civ_acosh(civ a) {
+CIV_INLINE civ civ_acosh(civ a) {
     if (!(a.lo >= 1.0) || a.hi != a.hi) return civ_nan();
     return civ_inc(acosh(a.lo), acosh(a.hi), 0.0, INFINITY);
 }
-static inline civ civ_atanh(civ a) {
+CIV_INLINE civ civ_atanh(civ a) {
     if (!(a.lo > -1.0 && a.hi < 1.0)) return civ_nan();
     return civ_inc(atanh(a.lo), atanh(a.hi), -INFINITY, INFINITY);
 }
-static inline civ civ_cosh(civ a) { /* even: cosh of [mignitude, magnitude] */
+CIV_INLINE civ civ_cosh(civ a) { /* even: cosh of [mignitude, magnitude] */
     civ m = civ_fabs(a);
     if (civ_isnan(m)) return m;
     return civ_inc(cosh(m.lo), cosh(m.hi), 1.0, INFINITY);
@@ -383,7 +452,7 @@ static inline civ civ_cosh(civ a) { /* even: cosh of [mignitude, magnitude] */
 /* Does [lo, hi] contain off + k period for an integer k? Conservative: may answer yes when it
  * does not (which only widens), never no when it does (the slack dwarfs the rounding of the
  * quotients, in every rounding mode). */
-static inline int civ_contains_point(double lo, double hi, double off, double period) {
+CIV_INLINE int civ_contains_point(double lo, double hi, double off, double period) {
     double kl = (lo - off) / period, kh = (hi - off) / period;
     double slack = 1e-9 + 1e-15 * (fabs(kl) + fabs(kh));
     return floor(kh + slack) >= ceil(kl - slack);
@@ -391,7 +460,7 @@ static inline int civ_contains_point(double lo, double hi, double off, double pe
 
 /* sin, cos: f at the ends, and 1 (-1) where the box holds a maximum (minimum) of f; the
  * whole [-1, 1] for a box of width 2 pi or more or beyond |t| = 1e8 */
-static inline civ civ_sincos(civ a, double (*f)(double), double max_off, double min_off) {
+CIV_INLINE civ civ_sincos(civ a, double (*f)(double), double max_off, double min_off) {
     double fl, fh, lo, hi, two_pi = 2.0 * CIV_PI_LO;
     if (civ_isnan(a)) return a;
     if (!(a.hi - a.lo < two_pi && fabs(a.lo) <= CIV_SIN_SAFE && fabs(a.hi) <= CIV_SIN_SAFE))
@@ -406,13 +475,13 @@ static inline civ civ_sincos(civ a, double (*f)(double), double max_off, double 
     return civ_make(lo, hi);
 }
 
-static inline civ civ_sin(civ a) {
+CIV_INLINE civ civ_sin(civ a) {
     return civ_sincos(a, sin, 0.5 * CIV_PI_LO, -0.5 * CIV_PI_LO);
 }
-static inline civ civ_cos(civ a) { return civ_sincos(a, cos, 0.0, CIV_PI_LO); }
+CIV_INLINE civ civ_cos(civ a) { return civ_sincos(a, cos, 0.0, CIV_PI_LO); }
 
 /* tan: increasing between its poles; possibly undefined where the box may hold a pole */
-static inline civ civ_tan(civ a) {
+CIV_INLINE civ civ_tan(civ a) {
     if (civ_isnan(a)) return a;
     if (!(a.hi - a.lo < CIV_PI_LO && fabs(a.lo) <= CIV_SIN_SAFE && fabs(a.hi) <= CIV_SIN_SAFE)
         || civ_contains_point(a.lo, a.hi, 0.5 * CIV_PI_LO, CIV_PI_LO))
@@ -421,19 +490,24 @@ static inline civ civ_tan(civ a) {
 }
 
 /* ---- powers */
-static inline civ civ_pow_int(civ a, double n) { /* n integer, |n| < 2^31 */
+/* a^n for an integer n >= 0 */
+CIV_INLINE civ civ_pow_nat(civ a, double n) {
     civ m;
     if (civ_isnan(a)) return a;
     if (n == 0.0) return civ_make(1.0, 1.0);
     if (n == 1.0) return a;
     if (n == 2.0) return civ_sq(a);
-    if (n < 0.0) return civ_inv(civ_pow_int(a, -n));
     if (fmod(n, 2.0) == 1.0) return civ_inc(pow(a.lo, n), pow(a.hi, n), -INFINITY, INFINITY);
     m = civ_fabs(a);
     return civ_inc(pow(m.lo, n), pow(m.hi, n), 0.0, INFINITY);
 }
 
-static inline civ civ_pow(civ a, civ b) {
+CIV_INLINE civ civ_pow_int(civ a, double n) { /* n integer, |n| < 2^31 */
+    if (n < 0.0) return civ_inv(civ_pow_nat(a, -n));
+    return civ_pow_nat(a, n);
+}
+
+CIV_INLINE civ civ_pow(civ a, civ b) {
     double c = b.lo;
     if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
     if (b.lo == b.hi && fabs(c) < 2147483648.0 && floor(c) == c) return civ_pow_int(a, c);
@@ -449,7 +523,7 @@ static inline civ civ_pow(civ a, civ b) {
     return civ_exp(civ_mul(b, civ_log(a)));
 }
 
-static inline civ civ_hypot(civ a, civ b) {
+CIV_INLINE civ civ_hypot(civ a, civ b) {
     civ x = civ_fabs(a), y = civ_fabs(b);
     if (civ_isnan(x) || civ_isnan(y)) return civ_nan();
     return civ_inc(hypot(x.lo, y.lo), hypot(x.hi, y.hi), 0.0, INFINITY);
@@ -457,7 +531,7 @@ static inline civ civ_hypot(civ a, civ b) {
 
 /* atan2(y, x) in [-pi, pi]: corners, or the whole range where the box meets the branch
  * cut (the negative x axis) or the origin */
-static inline civ civ_atan2(civ y, civ x) {
+CIV_INLINE civ civ_atan2(civ y, civ x) {
     double y0, y1, c1, c2, c3, c4;
     civ r;
     if (civ_isnan(y) || civ_isnan(x)) return civ_nan();
@@ -473,24 +547,24 @@ static inline civ civ_atan2(civ y, civ x) {
 }
 
 /* ---- piecewise operations (exact) */
-static inline civ civ_floor(civ a) {
+CIV_INLINE civ civ_floor(civ a) {
     if (civ_isnan(a)) return a;
     return civ_make(floor(a.lo), floor(a.hi));
 }
 
-static inline civ civ_ceil(civ a) {
+CIV_INLINE civ civ_ceil(civ a) {
     if (civ_isnan(a)) return a;
     return civ_make(ceil(a.lo), ceil(a.hi));
 }
 
-static inline double civ_sgn(double v) { return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }
+CIV_INLINE double civ_sgn(double v) { return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }
 
-static inline civ civ_sign(civ a) {
+CIV_INLINE civ civ_sign(civ a) {
     if (civ_isnan(a)) return a;
     return civ_make(civ_sgn(a.lo), civ_sgn(a.hi));
 }
 
-static inline civ civ_copysign(civ a, civ b) {
+CIV_INLINE civ civ_copysign(civ a, civ b) {
     civ m = civ_fabs(a);
     if (civ_isnan(m) || civ_isnan(b)) return civ_nan();
     if (b.lo >= 0.0) return m;
@@ -499,7 +573,7 @@ static inline civ civ_copysign(civ a, civ b) {
 }
 
 /* fmod(x, y): the sign of x, magnitude below |y| */
-static inline civ civ_fmod(civ a, civ b) {
+CIV_INLINE civ civ_fmod(civ a, civ b) {
     civ m;
     if (civ_isnan(a) || civ_isnan(b) || (b.lo <= 0.0 && b.hi >= 0.0)) return civ_nan();
     m = civ_fabs(b);
@@ -509,7 +583,7 @@ static inline civ civ_fmod(civ a, civ b) {
 }
 
 /* IEEE remainder(x, y): x itself when |x| <= |y| / 2, else magnitude below min(|x|, |y|/2) */
-static inline civ civ_remainder(civ a, civ b) {
+CIV_INLINE civ civ_remainder(civ a, civ b) {
     civ m;
     double half, xm, bound;
     if (civ_isnan(a) || civ_isnan(b) || (b.lo <= 0.0 && b.hi >= 0.0)) return civ_nan();
@@ -522,36 +596,36 @@ static inline civ civ_remainder(civ a, civ b) {
 }
 
 /* ---- comparisons and logic: [1, 1] surely true, [0, 0] surely false, else [0, 1] */
-static inline civ civ_bool(civ a, civ b, int sure_true, int sure_false) {
+CIV_INLINE civ civ_bool(civ a, civ b, int sure_true, int sure_false) {
     if (civ_isnan(a) || civ_isnan(b)) return civ_nan();
     return civ_make(sure_true ? 1.0 : 0.0, sure_false ? 0.0 : 1.0);
 }
 
-static inline int civ_thin_equal(civ a, civ b) {
+CIV_INLINE int civ_thin_equal(civ a, civ b) {
     return a.lo == a.hi && b.lo == b.hi && a.lo == b.lo;
 }
 
-static inline int civ_nonzero(civ a) { return a.lo > 0.0 || a.hi < 0.0; }
-static inline int civ_zero(civ a) { return a.lo == 0.0 && a.hi == 0.0; }
+CIV_INLINE int civ_nonzero(civ a) { return a.lo > 0.0 || a.hi < 0.0; }
+CIV_INLINE int civ_zero(civ a) { return a.lo == 0.0 && a.hi == 0.0; }
 
-static inline civ civ_lt(civ a, civ b) { return civ_bool(a, b, a.hi < b.lo, a.lo >= b.hi); }
-static inline civ civ_le(civ a, civ b) { return civ_bool(a, b, a.hi <= b.lo, a.lo > b.hi); }
-static inline civ civ_eq(civ a, civ b) {
+CIV_INLINE civ civ_lt(civ a, civ b) { return civ_bool(a, b, a.hi < b.lo, a.lo >= b.hi); }
+CIV_INLINE civ civ_le(civ a, civ b) { return civ_bool(a, b, a.hi <= b.lo, a.lo > b.hi); }
+CIV_INLINE civ civ_eq(civ a, civ b) {
     return civ_bool(a, b, civ_thin_equal(a, b), a.hi < b.lo || a.lo > b.hi);
 }
-static inline civ civ_ne(civ a, civ b) {
+CIV_INLINE civ civ_ne(civ a, civ b) {
     return civ_bool(a, b, a.hi < b.lo || a.lo > b.hi, civ_thin_equal(a, b));
 }
-static inline civ civ_not(civ a) { return civ_bool(a, a, civ_zero(a), civ_nonzero(a)); }
-static inline civ civ_and(civ a, civ b) {
+CIV_INLINE civ civ_not(civ a) { return civ_bool(a, a, civ_zero(a), civ_nonzero(a)); }
+CIV_INLINE civ civ_and(civ a, civ b) {
     return civ_bool(a, b, civ_nonzero(a) && civ_nonzero(b), civ_zero(a) || civ_zero(b));
 }
-static inline civ civ_or(civ a, civ b) {
+CIV_INLINE civ civ_or(civ a, civ b) {
     return civ_bool(a, b, civ_nonzero(a) || civ_nonzero(b), civ_zero(a) && civ_zero(b));
 }
 
 /* c ? x : 0 */
-static inline civ civ_if_else_zero(civ c, civ x) {
+CIV_INLINE civ civ_if_else_zero(civ c, civ x) {
     if (civ_isnan(c) || civ_isnan(x)) return civ_nan();
     if (civ_nonzero(c)) return x;
     if (civ_zero(c)) return civ_make(0.0, 0.0);

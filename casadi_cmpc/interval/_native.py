@@ -22,6 +22,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -42,7 +43,9 @@ from ._cgen import PRELUDE, c_double
 
 __all__ = ["native_kernel", "native_available", "kernel_dir"]
 
-_FLAGS = ("-O2", "-fno-fast-math", "-ffp-contract=off", "-fPIC", "-shared")
+_FLAGS = ("-O3", "-fno-fast-math", "-fno-trapping-math", "-ffp-contract=off", "-fopenmp-simd",
+          "-fPIC", "-shared")
+_ARCH = "-march=native"  # the SIMD width of this machine; dropped where the compiler refuses
 _lock = threading.Lock()
 _state: dict[str, Any] = {"cc": None, "checked": False, "warned": False}
 _loaded: dict[str, Any] = {}  # source hash -> the loaded kernel function
@@ -65,6 +68,27 @@ def _compiler() -> str | None:
                     _state["cc"] = c
                     break
         return _state["cc"]
+
+
+def _cpu_id() -> str:
+    """The processor's model and feature flags (a kernel built for one machine's SIMD width is
+    not loaded on another that shares the cache directory)."""
+    with _lock:
+        if "cpu" not in _state:
+            ident = [platform.machine(), platform.processor()]
+            try:
+                with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+                    seen: set[str] = set()
+                    for line in fh:
+                        key = line.split(":", 1)[0].strip()
+                        if key in ("model name", "flags", "Features", "CPU part") \
+                                and key not in seen:
+                            seen.add(key)
+                            ident.append(line.strip())
+            except OSError:
+                pass
+            _state["cpu"] = "\n".join(ident)
+        return _state["cpu"]
 
 
 def native_disabled() -> bool:
@@ -116,10 +140,10 @@ def _codegen_class() -> type:
 
         def _input(self, k: int, out: int, i: int, j: int) -> None:
             self.used_inputs.add(i)
-            self._set(out, f"CIV(P{i}[{2 * j}], P{i}[{2 * j + 1}])")
+            self._set(out, f"CIV(B{i}[{2 * j}][l], B{i}[{2 * j + 1}][l])")
 
         def _output(self, k: int, slot: int, oi: int, j: int) -> None:
-            self.lines.append(f"        civ_store(O{oi} + {2 * self.out_pos[oi][j]}, "
+            self.lines.append(f"        CIV_PUT(Q{oi}, {2 * self.out_pos[oi][j]}, "
                               f"{self._civ(slot)});")
 
         def _unary(self, k: int, op: int, name: str, out: int, i0: int) -> None:
@@ -138,26 +162,23 @@ def _codegen_class() -> type:
                 if np.isfinite(c):
                     self._set(out, f"civ_mulc({self._civ(var)}, {c_double(c)})")
                     return
+            if op == ca.OP_DIV and c1 is not None and c1 != 0.0 and np.isfinite(c1) \
+                    and c0 is None:
+                self._set(out, f"civ_divc({self._civ(i0)}, {c_double(c1)})")
+                return
+            if op == ca.OP_DIV and c0 is not None and not np.isnan(c0) and c1 is None:
+                self._set(out, f"civ_cdiv({c_double(c0)}, {self._civ(i1)})")
+                return
             self._set(out, f"{_C_BINARY[op]}({self._civ(i0)}, {self._civ(i1)})")
 
         def _finish(self) -> str:
-            n_in = self.fun.n_in()
             slots = sorted(self.slots)
             decl = [f"        civ {', '.join(f'v{s}' for s in slots[i:i + 12])};"
                     for i in range(0, len(slots), 12)]
-            head = [f"        const double *P{i} = in[{i}] + b * st[{i}];"
-                    for i in range(n_in) if i in self.used_inputs]
-            head += [f"        double *O{o} = out[{o}] + b * {2 * d};"
-                     for o, d in enumerate(self.size_out)]
-            return "\n".join([
-                "void cmpc_batch(long n, const double *const *in, const long *st, "
-                "double *const *out) {",
-                "    long b;",
-                "    for (b = 0; b < n; ++b) {",
-                *decl, *head, *self.lines,
-                "    }",
-                "    (void)in; (void)st; (void)out;",
-                "}", ""])
+            n_in = self.fun.n_in()
+            size_in = [int(self.fun.numel_in(i)) if i in self.used_inputs else 0
+                       for i in range(n_in)]
+            return _block_loop(size_in, self.size_out, decl + self.lines)
 
     return _CCodegen
 
@@ -172,12 +193,72 @@ _HEADER = r"""#include <math.h>
 #define CIV(a, b) ((civ){(a), (b)})
 
 /* an output bound pair, [-inf, inf] where it is possibly undefined (as the numpy backend) */
-static inline void civ_store(double *o, civ a) {
-    if (!(a.lo <= a.hi)) { o[0] = -INFINITY; o[1] = INFINITY; return; }
-    o[0] = a.lo;
-    o[1] = a.hi;
+CIV_INLINE civ civ_out(civ a) {
+    int ok = a.lo <= a.hi;
+    a.lo = ok ? a.lo : -INFINITY;
+    a.hi = ok ? a.hi : INFINITY;
+    return a;
 }
+#define CIV_PUT(Q, k, v) do { civ t_ = civ_out(v); Q[k][l] = t_.lo; Q[(k) + 1][l] = t_.hi; } \
+    while (0)
+
+/* The kernel runs in the default floating-point environment (round to nearest, subnormals
+ * kept: no flush-to-zero, no denormals-are-zero, exceptions masked), whatever the caller's,
+ * and restores the caller's on return. The rules hold in every rounding mode; a library
+ * that set flush-to-zero would break the rounding of tiny bounds. */
+#if defined(__SSE2__) || defined(__x86_64__)
+#include <xmmintrin.h>
+#define CIV_ENV_ENTER unsigned int civ_csr_ = _mm_getcsr(); _mm_setcsr(0x1F80u)
+#define CIV_ENV_LEAVE _mm_setcsr(civ_csr_)
+#else
+#include <fenv.h>
+#define CIV_ENV_ENTER fenv_t civ_env_; feholdexcept(&civ_env_); fesetenv(FE_DFL_ENV)
+#define CIV_ENV_LEAVE fesetenv(&civ_env_)
+#endif
+#define CMPC_L 16 /* boxes per block: whole SIMD registers of 2, 4 or 8 doubles */
 """
+
+
+def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[str],
+                n_extra_out: int = 0) -> str:
+    """The batch loop around a per-box ``body``: blocks of ``CMPC_L`` boxes, each input copied
+    into lane-major arrays ``B<i>[2 d_i][CMPC_L]`` (a short last block repeats its first
+    box), the body run for every lane ``l`` of the block in one loop a compiler can
+    vectorise (it writes ``Q<o>[2 d_o][CMPC_L]``), the outputs copied back for the boxes of
+    the block. ``size_in[i] == 0``: input ``i`` is not read. ``n_extra_out`` outputs
+    follow, of the sizes of ``size_out`` again."""
+    sizes = list(size_out) * (1 + n_extra_out)
+    L = ["void cmpc_batch(long n, const double *const *in, const long *st, "
+         "double *const *out) {",
+         "    long b0, l, k;",
+         "    CIV_ENV_ENTER;",
+         "    for (b0 = 0; b0 < n; b0 += CMPC_L) {",
+         "        long m = n - b0 < CMPC_L ? n - b0 : CMPC_L;"]
+    for i, d in enumerate(size_in):
+        if d:
+            L.append(f"        double B{i}[{2 * d}][CMPC_L];")
+    for o, d in enumerate(sizes):
+        L.append(f"        double Q{o}[{max(2 * d, 1)}][CMPC_L] = {{{{0.0}}}};")
+    L.append("        for (l = 0; l < CMPC_L; ++l) {")
+    L.append("            long bb = b0 + (l < m ? l : 0);")
+    for i, d in enumerate(size_in):
+        if d:
+            L += [f"            const double *P{i} = in[{i}] + bb * st[{i}];",
+                  f"            for (k = 0; k < {2 * d}; ++k) B{i}[k][l] = P{i}[k];"]
+    L += ["        }",
+          "        #pragma omp simd",
+          "        for (l = 0; l < CMPC_L; ++l) {",
+          *body,
+          "        }",
+          "        for (l = 0; l < m; ++l) {"]
+    for o, d in enumerate(sizes):
+        if d:
+            L += [f"            double *O{o} = out[{o}] + (b0 + l) * {2 * d};",
+                  f"            for (k = 0; k < {2 * d}; ++k) O{o}[k] = Q{o}[k][l];"]
+    L += ["        }", "    }", "    CIV_ENV_LEAVE;", "    (void)in; (void)st; (void)out; (void)k;",
+          "}", ""]
+    return "\n".join(L)
+
 
 
 def kernel_source(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray],
@@ -218,7 +299,7 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
                 self._set(out, f"CIV(M{i}_{j}, M{i}_{j})")
             else:
                 self.used_inputs.add(i - n_in)
-                self._set(out, f"CIV(P{i - n_in}[{2 * j}], P{i - n_in}[{2 * j + 1}])")
+                self._set(out, f"CIV(B{i - n_in}[{2 * j}][l], B{i - n_in}[{2 * j + 1}][l])")
 
         def _output(self, kk: int, slot: int, oi: int, j: int) -> None:
             self.results.add((oi, j))
@@ -230,29 +311,23 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
         gen.build()
     except _NoRule:
         return None
-    lines = ["void cmpc_batch(long n, const double *const *in, const long *st, "
-             "double *const *out) {", "    long b;", "    for (b = 0; b < n; ++b) {"]
+    lines: list[str] = []
     slots = sorted(gen.slots)
     lines += [f"        civ {', '.join(f'v{s}' for s in slots[i:i + 12])};"
               for i in range(0, len(slots), 12)]
     res = sorted(gen.results)
     lines += [f"        civ {', '.join(f'R{o}_{j}' for o, j in res[i:i + 12])};"
               for i in range(0, len(res), 12)]
-    lines += [f"        const double *P{i} = in[{i}] + b * st[{i}];" for i in range(n_in)]
-    lines += [f"        double *O{o} = out[{o}] + b * {2 * d};" for o, d in enumerate(size_out)]
-    if with_natural:
-        lines += [f"        double *N{o} = out[{k + o}] + b * {2 * d};"
-                  for o, d in enumerate(size_out)]
     # midpoints (inside the box) and radii rounded up, one per joint coordinate
     c = 0
     rad: list[str] = []
     for i, d in enumerate(size_in):
         for j in range(d):
             lines += [f"        double M{i}_{j}, D{c};",
-                      f"        {{ double lo = P{i}[{2 * j}], hi = P{i}[{2 * j + 1}], r;",
+                      f"        {{ double lo = B{i}[{2 * j}][l], hi = B{i}[{2 * j + 1}][l], r;",
                       f"          M{i}_{j} = 0.5 * lo + 0.5 * hi;",
-                      f"          if (M{i}_{j} < lo) M{i}_{j} = lo;",
-                      f"          if (M{i}_{j} > hi) M{i}_{j} = hi;",
+                      f"          M{i}_{j} = M{i}_{j} < lo ? lo : M{i}_{j};",
+                      f"          M{i}_{j} = M{i}_{j} > hi ? hi : M{i}_{j};",
                       f"          r = civ_max(M{i}_{j} - lo, hi - M{i}_{j});",
                       f"          D{c} = civ_up_(r); }}"]
             rad.append(f"D{c}")
@@ -266,10 +341,10 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
             pos = int(out_pos[i][j])
             fm, fb = f"R{i}_{j}", f"R{k + 1 + i}_{j}"
             if with_natural:
-                lines.append(f"        civ_store(N{i} + {2 * pos}, {fb});")
+                lines.append(f"        CIV_PUT(Q{k + i}, {2 * pos}, {fb});")
             terms = rows.get(int(row))
             if not terms:
-                lines.append(f"        civ_store(O{i} + {2 * pos}, {fb});")
+                lines.append(f"        CIV_PUT(Q{i}, {2 * pos}, {fb});")
                 continue
             kk = len(terms)
             scale = c_double(1.0 + (kk + 4) * arith.U)
@@ -279,37 +354,34 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
                 lines.append(f"          S += civ_term(R{k}_{t}, {rad[int(jac_cols[t])]});")
             lines += [f"          S = S * {scale} + {tiny};",
                       f"          lo = civ_dn_({fm}.lo - S); hi = civ_up_({fm}.hi + S);",
-                      f"          civ_store_mv(O{i} + {2 * pos}, lo, hi, {fm}, {fb}); }}"]
-    lines += ["    }", "    (void)in; (void)st; (void)out;", "}", ""]
-    return _HEADER + _CENTERED_HELPERS + "\n".join(lines)
+                      f"          CIV_PUT(Q{i}, {2 * pos}, civ_mv(lo, hi, {fm}, {fb})); }}"]
+    return _HEADER + _CENTERED_HELPERS + _block_loop(
+        [int(d) for d in size_in], size_out, lines, 1 if with_natural else 0)
 
 
 _CENTERED_HELPERS = r"""
 /* the array rules of the numpy mean-value combination, element by element */
-static inline double civ_dn_(double x) {
-    if (x > DBL_MAX) x = DBL_MAX;
+CIV_INLINE double civ_dn_(double x) {
+    x = x > DBL_MAX ? DBL_MAX : x;
     return x - fabs(x) * 0x1p-52;
 }
-static inline double civ_up_(double x) {
-    if (x < -DBL_MAX) x = -DBL_MAX;
+CIV_INLINE double civ_up_(double x) {
+    x = x < -DBL_MAX ? -DBL_MAX : x;
     return x + fabs(x) * 0x1p-52;
 }
 
 /* mag(J) * rad: a coordinate that does not vary contributes nothing, a NaN slope is +inf */
-static inline double civ_term(civ J, double r) {
-    double a = -J.lo, t;
-    if (a != a || J.hi != J.hi) t = NAN;
-    else t = (a > J.hi ? a : J.hi) * r;
-    if (t != t) t = (r == 0.0) ? 0.0 : INFINITY;
-    return t;
+CIV_INLINE double civ_term(civ J, double r) {
+    double a = -J.lo;
+    double t = civ_maxn(a, J.hi) * r; /* NaN for a NaN slope */
+    return t != t ? (r == 0.0 ? 0.0 : INFINITY) : t;
 }
 
-/* [lo, hi] intersected with the natural enclosure fb; NaN anywhere: possibly undefined */
-static inline void civ_store_mv(double *o, double lo, double hi, civ fm, civ fb) {
-    if (lo != lo || hi != hi || civ_isnan(fm) || civ_isnan(fb)) {
-        o[0] = -INFINITY; o[1] = INFINITY; return;
-    }
-    civ_store(o, civ_make(civ_max(lo, fb.lo), civ_min(hi, fb.hi)));
+/* [lo, hi] intersected with the natural enclosure fb; NaN anywhere: possibly undefined
+ * (NaN on both sides, stored as [-inf, inf]) */
+CIV_INLINE civ civ_mv(double lo, double hi, civ fm, civ fb) {
+    (void)fm; /* a NaN fm made lo and hi NaN */
+    return civ_make(civ_maxn(lo, fb.lo), civ_minn(hi, fb.hi));
 }
 
 """
@@ -330,8 +402,11 @@ def _build(src: str, key: str) -> Path | None:
             c = Path(tmp) / "k.c"
             c.write_text(src)
             so = Path(tmp) / "k.so"
-            r = subprocess.run([*cc.split(), *_FLAGS, "-o", str(so), str(c), "-lm"],
-                               capture_output=True, text=True, timeout=300)
+            cmd = [*cc.split(), *_FLAGS, "-o", str(so), str(c), "-lm"]
+            r = subprocess.run([*cmd[:1], _ARCH, *cmd[1:]], capture_output=True, text=True,
+                               timeout=300)
+            if r.returncode != 0:
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
             if r.returncode != 0:
                 warnings.warn(f"the native interval kernel did not compile ({cc}): "
                               f"{r.stderr.strip()[:400]}; numpy evaluates instead",
@@ -369,8 +444,8 @@ def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int]
     outputs ``(n, d_o, 2)``), compiled or loaded from the disk cache; None on failure."""
     if not native_available():
         return None
-    key = hashlib.sha256((src + "\0" + str(_compiler()) + "\0" + " ".join(_FLAGS)).encode()
-                         ).hexdigest()[:24]
+    key = hashlib.sha256("\0".join([src, str(_compiler()), " ".join(_FLAGS), _ARCH,
+                                     _cpu_id()]).encode()).hexdigest()[:24]
     with _lock:
         fn = _loaded.get(key)
     if fn is None:

@@ -204,3 +204,42 @@ def test_constants_are_exact_hexadecimal_literals():
     assert c_double(float("inf")) == "INFINITY" and c_double(float("-inf")) == "-INFINITY"
     assert c_double(float("nan")) == "NAN"
     assert float.fromhex(c_double(5e-324)) == 5e-324
+
+
+@pytest.mark.parametrize("mode", ["nearest", "upward", "downward", "toward_zero"])
+def test_exp_polynomial_encloses_in_every_rounding_mode(tmp_path, mode):
+    """The C exp (range reduction, Taylor polynomial, the bits of 2^k) encloses e^x at
+    60 digits on thin and wide boxes from below the subnormal range to overflow, in every
+    FPU rounding mode, and stays within 2^-40 relative where e^x is a normal float."""
+    import ctypes.util
+
+    libm = ctypes.CDLL(ctypes.util.find_library("m"))
+    codes = {"nearest": 0, "downward": 0x400, "upward": 0x800, "toward_zero": 0xC00}
+    if libm.fegetround() != 0:
+        pytest.skip("fesetround not available as expected")
+    v = ca.SX.sym("v", 1)
+    lib = compile_interval(ca.Function("e", [v], [ca.exp(v)]), tmp_path)
+    rng = np.random.default_rng(11)
+    edges = [-760.0, -745.2, -708.4, -700.0000001, -700.0, -699.9999999, -1e-300, 0.0,
+             5e-324, 1e-16, 0.34657359, 0.6931471805599453, 1.0, 88.7, 708.0, 709.0,
+             709.0000001, 709.78, 709.79, 800.0]
+    xs = np.concatenate([edges, rng.uniform(-40, 40, 600), rng.uniform(-745, 710, 600)])
+    mpmath.mp.prec = 200
+    assert libm.fesetround(ctypes.c_int(codes[mode])) == 0
+    try:
+        res = [call(lib, np.array([x]), np.array([x]), 1) for x in xs]
+        wide = [call(lib, np.array([x]), np.array([x + 0.5]), 1) for x in xs[:200]]
+    finally:
+        libm.fesetround(ctypes.c_int(0))
+    for x, (lo, hi) in zip(xs, res, strict=True):
+        e = mpmath.exp(mpmath.mpf(float(x)))
+        assert mpmath.mpf(float(lo[0])) <= e <= mpmath.mpf(float(hi[0])), (mode, x, lo, hi)
+        if -700 <= x <= 709:
+            assert (hi[0] - lo[0]) <= 2.0 ** -40 * float(e), (mode, x, lo, hi)
+    for x, (lo, hi) in zip(xs[:200], wide, strict=True):
+        assert mpmath.mpf(float(lo[0])) <= mpmath.exp(mpmath.mpf(float(x)))
+        assert mpmath.exp(mpmath.mpf(float(x + 0.5))) <= mpmath.mpf(float(hi[0]))
+    lo, hi = call(lib, np.array([np.nan]), np.array([np.nan]), 1)
+    assert np.isnan(lo[0]) and np.isnan(hi[0])
+    lo, hi = call(lib, np.array([-np.inf]), np.array([np.inf]), 1)
+    assert lo[0] == 0.0 and hi[0] == np.inf
