@@ -260,3 +260,49 @@ def test_cmpc_native_0_turns_the_backend_off_without_a_warning(monkeypatch):
         a = F(X)[0]
     assert F._native is False
     np.testing.assert_array_equal(a, InclusionFunction(f, backend="numpy")(X)[0])
+
+
+_CSR_SRC = r"""
+#include <xmmintrin.h>
+unsigned int get_csr(void) { return _mm_getcsr(); }
+void set_csr(unsigned int v) { _mm_setcsr(v); }
+"""
+
+
+def test_flush_to_zero_of_the_caller_neither_narrows_nor_leaks(tmp_path):
+    """A library compiled with fast-math sets flush-to-zero and denormals-are-zero for the
+    whole process: a subnormal product then becomes 0 and an upper bound 0 + 1 ulp would
+    miss it. The kernel runs in the default environment and gives the caller's back."""
+    import platform
+    import shutil
+    import subprocess
+
+    if platform.machine() not in ("x86_64", "AMD64") or shutil.which("gcc") is None:
+        pytest.skip("needs x86-64 and gcc")
+    (tmp_path / "csr.c").write_text(_CSR_SRC)
+    subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-o", str(tmp_path / "csr.so"),
+                    str(tmp_path / "csr.c")], check=True, capture_output=True)
+    lib = ctypes.CDLL(str(tmp_path / "csr.so"))
+    lib.get_csr.restype = ctypes.c_uint
+    lib.set_csr.argtypes = [ctypes.c_uint]
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    F = InclusionFunction(ca.Function("p", [x, y], [ca.vertcat(x * y, x * y + x)]),
+                          backend="native")
+    X = np.array([[[1e-300, 1e-300]], [[3e-160, 3e-160]], [[-1e-300, -1e-300]]])
+    Y = np.array([[[1e-10, 1e-10]], [[3e-160, 3e-160]], [[1e-10, 1e-10]]])
+    import mpmath
+
+    exact = [mpmath.mpf(float(a)) * mpmath.mpf(float(b))
+             for a, b in zip(X[:, 0, 0], Y[:, 0, 0], strict=True)]  # subnormal products
+    saved = lib.get_csr()
+    ftz = (saved | 0x8040)  # flush-to-zero, denormals-are-zero
+    lib.set_csr(ftz)
+    try:
+        out = F(X, Y)[0]
+        after = lib.get_csr()
+    finally:
+        lib.set_csr(saved)
+    assert after & 0xFFC0 == ftz & 0xFFC0  # the caller's mode and masks come back
+    for k, e in enumerate(exact):
+        lo, hi = out[k, 0]
+        assert mpmath.mpf(float(lo)) <= e <= mpmath.mpf(float(hi)), (k, lo, hi)
