@@ -16,6 +16,9 @@ Prints one JSON line:
 * ``e9_sequence``: the E9 robust controllable sequence at eps 0.05, seconds with numpy forced
   against the default backend (native once a function is called repeatedly), and whether
   the sets are identical.
+* ``before_issue``: the CSTR numpy inclusion at 1e5 boxes and the E9 sequence of the code
+  before the native backend (commit ``BASELINE``, checked out in a temporary git worktree
+  and run in a child process of this run), and the ratios of today's default against them.
 
 Ratios are what counts: the machine is shared.
 """
@@ -25,7 +28,11 @@ from __future__ import annotations
 import json
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -160,12 +167,64 @@ def e9_sequence() -> dict:
             "identical_sets": bool(same), "steps": len(s_auto.steps)}
 
 
+BASELINE = "bf2c92b"  # the last commit before the native backend and the fused classifier
+
+_BASELINE_SCRIPT = r"""
+import json, os, sys, time
+import numpy as np
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+sys.path.insert(0, sys.argv[1])
+import casadi_cmpc as cm
+from casadi_cmpc.interval import InclusionFunction
+from _timing import median_time
+m = cm.models.load("cstr").model
+rng = np.random.default_rng(0)
+c = rng.uniform(m.X.lo, m.X.hi, (100000, 2))
+X = np.stack([c - 0.01, c + 0.01], -1)
+U = np.stack([np.full((100000, 1), -0.1), np.full((100000, 1), 0.1)], -1)
+num = InclusionFunction(m.function, backend="numpy")
+t_num = median_time(lambda: num(X, U, np.zeros((1, 0, 2))), 7)
+ex = cm.models.load("cannon_robust")
+t0 = time.perf_counter()
+cm.controllable_sets(ex.model, ex.terminal, 0.05, robust=True, law=ex.local_law,
+                     progress=False)
+print(json.dumps({"numpy_boxes_per_s": 1e5 / t_num, "e9_s": time.perf_counter() - t0}))
+"""
+
+
+def before_issue(res: dict) -> dict:
+    """The baseline commit's figures, measured now in a child process (see the notes)."""
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        wt = Path(tmp) / "baseline"
+        r = subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", str(wt),
+                            BASELINE], capture_output=True, text=True)
+        if r.returncode != 0:
+            return {"error": f"git worktree of {BASELINE}: {r.stderr.strip()[:200]}"}
+        try:
+            env = dict(os.environ, PYTHONPATH=str(wt), XDG_CACHE_HOME=str(Path(tmp) / "c"))
+            p = subprocess.run([sys.executable, "-c", _BASELINE_SCRIPT,
+                                str(Path(__file__).resolve().parent)], capture_output=True,
+                               text=True, env=env, cwd=tmp, timeout=1800)
+            if p.returncode != 0:
+                return {"error": p.stderr.strip()[-400:]}
+            base = json.loads(p.stdout.strip().splitlines()[-1])
+        finally:
+            subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(wt)],
+                           capture_output=True)
+    return {"commit": BASELINE, **base,
+            "native_over_baseline_numpy": res["inclusion_1e5"]["native_boxes_per_s"]
+            / base["numpy_boxes_per_s"],
+            "e9_baseline_over_default": base["e9_s"] / res["e9_sequence"]["default_s"]}
+
+
 def main() -> dict:
     if not native_available():
         return {"error": "no C compiler: the native backend is not available"}
     res = {"machine": platform.machine(), "cpus": os.cpu_count(),
            "inclusion_1e5": inclusion_1e5(), "batch_300": batch_300(), "call_n1": call_n1(),
            "one_step_3state": one_step_3state(), "e9_sequence": e9_sequence()}
+    res["before_issue"] = before_issue(res)
     return res
 
 

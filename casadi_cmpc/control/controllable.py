@@ -116,57 +116,68 @@ class _Target:
         self.F = inclusion(model.function, "centered") if (boxes or self.zonos) else None
         self.empty = not (self.polys or boxes or self.zonos)
 
-    def _rows(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> list[np.ndarray]:
+    def images(self, X: np.ndarray, U: np.ndarray, W: np.ndarray
+               ) -> tuple[list[np.ndarray], np.ndarray | None]:
+        """One evaluation of every test function on the boxes (N, ., 2) (U, W: N rows or
+        one): the enclosures of the rows ``H f`` of each polytope member, (N, r, 2) each,
+        and the hull of ``f`` (N, n, 2) when a member is a box union or a zonotope (else
+        None)."""
         N = X.shape[0]
-        out = []
-        for F, _, _ in self.polys:
-            out.append(F.evaluate_unchecked([X, U, W], N)[0])
-        return out
+        rows = [F.evaluate_unchecked([X, U, W], N)[0] for F, _, _ in self.polys]
+        Y = self.F.evaluate_unchecked([X, U, W], N)[0] if self.F is not None else None
+        return rows, Y
 
-    def _hull(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
-        return self.F.evaluate_unchecked([X, U, W], X.shape[0])[0]
-
-    def inside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
-        """Proven ``f(x, u, w) in T`` for all x, u, w of the boxes, (N,)."""
-        N = X.shape[0]
+    def inside_of(self, rows: list[np.ndarray], Y: np.ndarray | None) -> np.ndarray:
+        """Proven ``f(x, u, w) in T`` from the :meth:`images` of a batch, (N,)."""
+        N = rows[0].shape[0] if rows else (0 if Y is None else Y.shape[0])
         ok = np.zeros(N, dtype=bool)
         if self.empty or N == 0:
             return ok
-        for (_, _, b), R in zip(self.polys, self._rows(X, U, W), strict=True):
+        for (_, _, b), R in zip(self.polys, rows, strict=True):
             ok |= (R[..., 1] <= b).all(axis=1)
-        if self.F is not None:
+        if Y is not None:
             und = np.flatnonzero(~ok)
             if und.size:
-                Y = self._hull(X[und], U[und] if U.shape[0] > 1 else U,
-                               W[und] if W.shape[0] > 1 else W)
-                fin = np.isfinite(Y).all(axis=(1, 2))
+                Yu = Y[und]
+                fin = np.isfinite(Yu).all(axis=(1, 2))
                 got = np.zeros(und.size, dtype=bool)
                 if self.boxes is not None:
-                    got |= self.boxes.contains_box(Y, view="inner") & fin
+                    got |= self.boxes.contains_box(Yu, view="inner") & fin
                 for Z in self.zonos:
-                    got |= np.asarray(Z.contains_box(Y), dtype=bool) & fin
+                    got |= np.asarray(Z.contains_box(Yu), dtype=bool) & fin
                 ok[und[got]] = True
         return ok
 
-    def outside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
-        """Proven ``f(x, u, w) not in T`` for all x, u, w of the boxes, (N,)."""
-        N = X.shape[0]
-        if self.empty:
-            return np.ones(N, dtype=bool)
+    def outside_of(self, rows: list[np.ndarray], Y: np.ndarray | None) -> np.ndarray:
+        """Proven ``f(x, u, w) not in T`` from the :meth:`images` of a batch, (N,)."""
+        N = rows[0].shape[0] if rows else (0 if Y is None else Y.shape[0])
         out = np.ones(N, dtype=bool)
-        for (_, _, b), R in zip(self.polys, self._rows(X, U, W), strict=True):
+        if self.empty:
+            return out
+        for (_, _, b), R in zip(self.polys, rows, strict=True):
             out &= (R[..., 0] > b).any(axis=1)
-        if self.F is not None and out.any():
+        if Y is not None and out.any():
             idx = np.flatnonzero(out)
-            Y = self._hull(X[idx], U[idx] if U.shape[0] > 1 else U,
-                           W[idx] if W.shape[0] > 1 else W)
-            meet = ~np.isfinite(Y).all(axis=(1, 2))
+            Yi = Y[idx]
+            meet = ~np.isfinite(Yi).all(axis=(1, 2))
             if self.boxes is not None:
-                meet |= self.boxes.intersects_box(np.nan_to_num(Y), view="inner")
+                meet |= self.boxes.intersects_box(np.nan_to_num(Yi), view="inner")
             for Z in self.zonos:
-                meet |= np.asarray(Z.intersects_box(np.nan_to_num(Y)), dtype=bool)
+                meet |= np.asarray(Z.intersects_box(np.nan_to_num(Yi)), dtype=bool)
             out[idx[meet]] = False
         return out
+
+    def inside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """Proven ``f(x, u, w) in T`` for all x, u, w of the boxes, (N,)."""
+        if self.empty or X.shape[0] == 0:
+            return np.zeros(X.shape[0], dtype=bool)
+        return self.inside_of(*self.images(X, U, W))
+
+    def outside(self, X: np.ndarray, U: np.ndarray, W: np.ndarray) -> np.ndarray:
+        """Proven ``f(x, u, w) not in T`` for all x, u, w of the boxes, (N,)."""
+        if self.empty:
+            return np.ones(X.shape[0], dtype=bool)
+        return self.outside_of(*self.images(X, U, W))
 
 
 def _as_obstacles(obstacles: Any, n: int) -> list[Any]:
@@ -223,21 +234,36 @@ class _OneStepClassifier:
         for ob in self.obstacles:
             blocked |= np.asarray(ob.intersects_box(X), dtype=bool)
             buried |= np.asarray(ob.contains_box(X), dtype=bool)
+        # one evaluation of the target's test functions for the whole batch: the pairs
+        # with each point w_c of W (exclusion) and the boxes with the cell midpoint over
+        # all of W (inclusion)
+        T = self.target
+        und = np.flatnonzero(~buried)
+        cand = np.flatnonzero(~buried & ~blocked)
+        if T.empty or und.size == 0:
+            labels[:] = OUTER  # nothing reaches an empty target; every box is buried
+            return labels
+        wp = self.w_points
+        nc, K = wp.shape[0], und.size
+        lo, hi = C[cand, :, 0], C[cand, :, 1]
+        mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+        Xs = np.concatenate([np.tile(X[und], (nc, 1, 1)), X[cand]])
+        Us = np.concatenate([np.tile(C[und], (nc, 1, 1)), np.stack([mid, mid], axis=-1)])
+        Wp = np.repeat(np.stack([wp, wp], axis=-1), K, axis=0)  # (nc K, l, 2)
+        Ws = np.concatenate([Wp, np.broadcast_to(self.W, (cand.size,) + self.W.shape[1:])])
+        rows, Y = T.images(Xs, Us, Ws)
+        m = nc * K
+        out = T.outside_of([R[:m] for R in rows], None if Y is None else Y[:m])
         useless = buried.copy()
-        for wc in self.w_points:
-            und = np.flatnonzero(~useless)
-            if und.size == 0:
-                break
-            Wc = np.stack([wc, wc], axis=-1)[None]
-            useless[und] = self.target.outside(X[und], C[und], Wc)
+        useless[und] = out.reshape(nc, K).any(axis=0)
         labels[useless] = OUTER
-        cand = np.flatnonzero(~useless & ~blocked)
+        keep = ~useless[cand]
+        cand = cand[keep]
         if cand.size:
-            lo, hi = C[cand, :, 0], C[cand, :, 1]
-            mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-            ok = self.target.inside(X[cand], np.stack([mid, mid], axis=-1), self.W)
+            ok = T.inside_of([R[m:][keep] for R in rows],
+                             None if Y is None else Y[m:][keep])
             labels[cand[ok]] = INNER
-            fr.data["witness"][cand[ok]] = mid[ok]
+            fr.data["witness"][cand[ok]] = mid[keep][ok]
         return labels
 
 
