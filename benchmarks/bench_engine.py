@@ -4,7 +4,8 @@ Prints one JSON line:
 
 * ``inclusion_1e5``: the CSTR natural inclusion at 1e5 boxes, boxes per second with the
   native backend (fused C loop) and with numpy, their ratio, and CasADi's own batched point
-  evaluation (``Function.map``, no intervals) as the hardware anchor; immrax where installed.
+  evaluation (``Function.map``, no intervals) as the hardware anchor; immrax (JAX, float64,
+  one core, rounding to nearest: not sound) where installed.
 * ``batch_300``: the CSTR natural and centered inclusions at 300 boxes (the mean batch of the
   set searches), µs per call, native against numpy.
 * ``call_n1``: one natural call at N = 1 on the 2-state cannon model (E8), µs, with the
@@ -37,6 +38,9 @@ from pathlib import Path
 import numpy as np
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# immrax (JAX) on one core as well, in float64
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false "
+                      "intra_op_parallelism_threads=1")
 
 from _timing import median_time  # noqa: E402
 
@@ -69,11 +73,58 @@ def inclusion_1e5() -> dict:
            "casadi_points_per_s": 1e5 / t_pt, "native_over_numpy": t_num / t_nat,
            "native_cost_over_casadi_point": t_nat / t_pt}
     try:
-        import immrax  # noqa: F401  (benchmark-only; rounds to nearest: not sound)
-        out["immrax"] = "installed, not measured here"
+        t_imm = _immrax_time(f, *args[:2])
     except ImportError:
         out["immrax"] = "not installed"
+    else:
+        out["immrax_boxes_per_s"] = 1e5 / t_imm
+        out["native_over_immrax"] = t_imm / t_nat
     return out
+
+
+def _immrax_time(f, X: np.ndarray, U: np.ndarray) -> float:
+    """Median time of immrax's natural inclusion (float64, jit-compiled, vmapped over the
+    boxes) of the SX Function ``f(x, u)``, written as JAX operations by a walk of its
+    instructions. immrax rounds to nearest: its enclosures are not sound."""
+    import casadi as ca
+    import immrax as irx
+    import jax
+    import jax.numpy as jnp
+
+    jax.config.update("jax_enable_x64", True)
+    binary = {ca.OP_ADD: lambda a, b: a + b, ca.OP_SUB: lambda a, b: a - b,
+              ca.OP_MUL: lambda a, b: a * b, ca.OP_DIV: lambda a, b: a / b}
+    unary = {ca.OP_EXP: jnp.exp, ca.OP_NEG: lambda a: -a, ca.OP_SQ: lambda a: a * a,
+             ca.OP_SIN: jnp.sin, ca.OP_COS: jnp.cos, ca.OP_ASSIGN: lambda a: a}
+    prog = [(f.instruction_id(k), list(f.instruction_input(k)),
+             list(f.instruction_output(k)), float(f.instruction_constant(k))
+             if f.instruction_id(k) == ca.OP_CONST else 0.0)
+            for k in range(f.n_instructions())]
+
+    def g(x, u):
+        ins, w, out = [x, u], {}, [None] * f.nnz_out(0)
+        for op, i, o, c in prog:
+            if op == ca.OP_CONST:
+                w[o[0]] = c
+            elif op == ca.OP_INPUT:
+                w[o[0]] = ins[i[0]][i[1]]
+            elif op == ca.OP_OUTPUT:
+                out[o[1]] = w[i[0]]
+            elif op in binary:
+                w[o[0]] = binary[op](w[i[0]], w[i[1]])
+            else:
+                w[o[0]] = unary[op](w[i[0]])
+        return out
+
+    G = irx.natif(g)
+
+    def one(xl, xh, ul, uh):
+        return [(q.lower, q.upper) for q in G(irx.interval(xl, xh), irx.interval(ul, uh))]
+
+    run = jax.jit(jax.vmap(one))
+    a = [jnp.asarray(X[..., 0]), jnp.asarray(X[..., 1]), jnp.asarray(U[..., 0]),
+         jnp.asarray(U[..., 1])]
+    return median_time(lambda: jax.block_until_ready(run(*a)), 7)
 
 
 def batch_300() -> dict:
@@ -173,6 +224,9 @@ _BASELINE_SCRIPT = r"""
 import json, os, sys, time
 import numpy as np
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# immrax (JAX) on one core as well, in float64
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false "
+                      "intra_op_parallelism_threads=1")
 sys.path.insert(0, sys.argv[1])
 import casadi_cmpc as cm
 from casadi_cmpc.interval import InclusionFunction

@@ -20,6 +20,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._bisect import bisect_widest
 from .._interrupt import InterruptScope
 from .._validate import float_vector as _vector
 from .._validate import weight_matrix as _weight
@@ -200,7 +201,7 @@ def _disjoint(fr: Any, S: Any) -> np.ndarray:
     if len(fr) == 0:
         return np.zeros(0, dtype=bool)
     if isinstance(S, Zonotope):
-        from ..solvers.zonotope_sivia import _ZonotopeTest
+        from ..solvers._ztargets import _ZonotopeTest
 
         return _ZonotopeTest(S).disjoint(fr.centers, fr.generators, fr.radii)
     _, hi = fr.support_bounds(-S.A)  # h_Z(-a) <= hi, so min_Z a.x >= -hi
@@ -776,13 +777,11 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
             w = M[..., 1] - M[..., 0]
             if w.max() <= eps_opt:
                 continue
-            i, j = np.unravel_index(int(np.argmax(w)), w.shape)  # widest, first in row order
-            mid = 0.5 * M[i, j, 0] + 0.5 * M[i, j, 1]
-            L, R = M.copy(), M.copy()
-            L[i, j, 1] = mid
-            R[i, j, 0] = mid
-            push(L)
-            push(R)
+            # the widest entry (first in row order) is halved
+            lo2, hi2, _, _ = bisect_widest(M[..., 0].reshape(1, -1), M[..., 1].reshape(1, -1),
+                                           w.reshape(1, -1))
+            for half in range(2):
+                push(np.stack([lo2[half], hi2[half]], axis=-1).reshape(M.shape))
     except KeyboardInterrupt:
         scope.reraise_if_nested()
         status, message = Status.BUDGET, "interrupted"

@@ -172,7 +172,7 @@ class _Prover:
     3. :meth:`Polytope.is_subset` against the union of the remaining members.
 
     For a union of boxes, step 3 is first tried on the grid of the boxes' bounds
-    (:meth:`casadi_cmpc.sets.paving._BoxGrid.polytope_inside`: every uncovered cell meeting
+    (:meth:`casadi_cmpc.sets._boxunion._BoxGrid.polytope_inside`: every uncovered cell meeting
     P's rigorous bounding box is proven disjoint from P), whose answer is final there.
 
     Only step 3 can answer True; steps 1-2 err toward "not proven" only.
@@ -180,7 +180,7 @@ class _Prover:
 
     def __init__(self, members: list[Polytope], mboxes: np.ndarray, n_probe: int = 256,
                  boxes: np.ndarray | None = None) -> None:
-        from ..sets.paving import _BoxGrid
+        from ..sets._boxunion import _BoxGrid
 
         # a union of boxes: the exact grid of their bounds decides most candidates fast
         self.grid = _BoxGrid.build(boxes) if boxes is not None and boxes.shape[0] else None

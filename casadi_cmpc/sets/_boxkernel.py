@@ -28,6 +28,11 @@ below that).  Hence ``S_k <= 0`` proves ``box ⊆ {a_k.x <= b_k}``; the lower te
 (``> 0`` proves ``box ∩ {a_k.x <= b_k} = ∅``) is symmetric.  The products are done in
 chunks small enough for OpenBLAS to run them on one thread (cache friendly, and immune
 to thread contention on busy machines).
+
+Points are tested against rows by :func:`points_le` (plain floating point) and
+:func:`exact_points_le` (exact), and a box against an implied inequality ``y^T A x <= y^T b``
+(LP multipliers ``y >= 0``) by :func:`_certify_separation` (rigorous, exact near the
+bound).
 """
 
 import math
@@ -39,6 +44,13 @@ __all__: list[str] = []
 
 _TINY = 1e-300
 _SPLIT = 134217729.0  # 2^27 + 1 (Veltkamp)
+_U = 2.0 ** -53  # unit roundoff of binary64
+
+
+def _gamma(k: int) -> float:
+    """``gamma_k = k u / (1 - k u)``: relative error bound of a sum or dot product of length
+    ``k`` in binary64 (``u = 2^-53``)."""
+    return k * _U / (1.0 - k * _U)
 
 
 def _chunk(m: int, q: int) -> int:
@@ -256,3 +268,113 @@ class BoxKernel:
         np.logical_or.at(fail, bi, ~ok)
         res[idx[~fail]] = True
         return res
+
+
+def exact_points_le(X: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``all(A x <= b)`` decided exactly for each row x of X (N, n) -> (N,) bool.
+
+    The floating-point residuals ``A x - b`` with the bound ``gamma_{n+2} (|A| |x| + |b|)``
+    of their rounding error decide every row they can; a point with a row inside that
+    bound is decided in exact rational arithmetic (the float data taken as exact). Rows
+    with ``b = +inf`` hold everywhere, ``b = -inf`` nowhere; a non-finite point is decided
+    in plain floating point.
+    """
+    N, n = X.shape
+    if A.shape[0] == 0 or N == 0:
+        return np.ones(N, dtype=bool)
+    with np.errstate(over="ignore", invalid="ignore"):
+        S = X @ A.T - b[None, :]
+        mag = np.abs(X) @ np.abs(A).T + np.abs(b)[None, :]
+        err = _gamma(n + 2) * mag + 1e-300
+    sure_in = (S <= -err) | (b[None, :] == np.inf)
+    sure_out = (S > err) | (b[None, :] == -np.inf)
+    inside = sure_in.all(axis=1)
+    out = sure_out.any(axis=1)
+    undecided = np.flatnonzero(~inside & ~out)
+    if undecided.size:
+        finite = np.isfinite(X[undecided]).all(axis=1)
+        plain = undecided[~finite]
+        inside[plain] = ((X[plain] @ A.T) <= b[None, :]).all(axis=1)
+        rows: dict[int, tuple[list[Fraction], Fraction]] = {}
+        for k in undecided[finite]:
+            xk = [Fraction(float(v)) for v in X[k]]
+            ok = True
+            for i in np.flatnonzero(~sure_in[k]).tolist():
+                if i not in rows:
+                    rows[i] = ([Fraction(float(a)) for a in A[i]], Fraction(float(b[i])))
+                ai, bi = rows[i]
+                if sum((a * x for a, x in zip(ai, xk, strict=True)), Fraction(0)) > bi:
+                    ok = False
+                    break
+            inside[k] = ok
+    return inside
+
+
+def _exact_box_slack(y: np.ndarray, A: np.ndarray, b: np.ndarray, lo: np.ndarray,
+                     hi: np.ndarray) -> Fraction | None:
+    """Exact ``min_{x in [lo, hi]} (A^T y).x - y.b`` (None when it is ``-inf``)."""
+    idx = np.flatnonzero(y != 0.0)
+    yf = [Fraction(float(y[i])) for i in idx]
+    beta = sum((v * Fraction(float(b[i])) for v, i in zip(yf, idx, strict=True)),
+               Fraction(0))
+    total = -beta
+    for j in range(A.shape[1]):
+        g = sum((v * Fraction(float(A[i, j])) for v, i in zip(yf, idx, strict=True)),
+                Fraction(0))
+        if g == 0:
+            continue
+        bound = lo[j] if g > 0 else hi[j]
+        if not np.isfinite(bound):
+            return None
+        total += g * Fraction(float(bound))
+    return total
+
+
+def _certify_separation(Y: np.ndarray, A: np.ndarray, b: np.ndarray,
+                        bx: np.ndarray, strict: bool = True) -> np.ndarray:
+    """Rigorous check that ``y^T A x <= y^T b`` excludes each box.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (K, m), >= 0
+    A, b : raw finite rows, shapes (m, n), (m,); or one set per box, (K, m, n), (K, m)
+    bx : ndarray, shape (K, n, 2)
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+        True where ``min_{x in box} (A^T y).x - y^T b > 0`` (``>= 0`` when not
+        ``strict``) is proven: by a floating-point evaluation with a rigorous bound on its
+        rounding error, or, when the value lies within that bound, in exact rational
+        arithmetic.
+    """
+    K, m = Y.shape
+    n = A.shape[-1]
+    if A.ndim == 3:  # one row set per box: A (K, m, n), b (K, m)
+        G = np.einsum("km,kmn->kn", Y, A)
+        beta = (Y * b).sum(axis=1)
+        Ge = _gamma(m + 2) * np.einsum("km,kmn->kn", Y, np.abs(A))
+        be = _gamma(m + 2) * (Y * np.abs(b)).sum(axis=1)
+    else:
+        G = Y @ A
+        beta = Y @ b
+        Ge = _gamma(m + 2) * (Y @ np.abs(A))  # |G - exact| <= Ge
+        be = _gamma(m + 2) * (Y @ np.abs(b))
+    lo, hi = bx[..., 0], bx[..., 1]
+    with np.errstate(invalid="ignore", over="ignore"):
+        t = np.where(G > 0, G * lo, np.where(G < 0, G * hi, 0.0))
+        M = np.maximum(np.abs(lo), np.abs(hi))
+        L = t.sum(axis=1)
+        err = (_gamma(n + 2) * np.where(np.isfinite(t), np.abs(t), 0.0).sum(axis=1)
+               + np.where(Ge > 0, Ge * M, 0.0).sum(axis=1) + be)
+        slack = L - beta
+        err = (err + _gamma(4) * (np.abs(L) + np.abs(beta))) * (1 + 8 * _U) + 1e-300
+        ok = slack > err if strict else slack >= err
+        fin = np.isfinite(slack) & np.isfinite(err)
+        amb = fin & ~ok & (slack >= -err)
+    ok = np.where(fin, ok, False)
+    for k in np.flatnonzero(amb).tolist():
+        Ak, bk = (A[k], b[k]) if A.ndim == 3 else (A, b)
+        v = _exact_box_slack(Y[k], Ak, bk, lo[k], hi[k])
+        ok[k] = v is not None and (v > 0 if strict else v >= 0)
+    return ok

@@ -82,6 +82,56 @@ def div_up(a, b):
         return ia.upm(np.asarray(a, dtype=float) / np.asarray(b, dtype=float))
 
 
+def two_sum_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact ``(a + b) - fl(a + b)`` (Knuth's TwoSum; finite operands), elementwise."""
+    s = a + b
+    z = s - a
+    return (a - (s - z)) + (b - z)
+
+
+def halve_generator(C: np.ndarray, H: np.ndarray, k: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
+    r"""The two halves (thesis Thm 4.1) of zonotopes ``c_i ⊕ H_i B^p``, one generator each.
+
+    Parameters
+    ----------
+    C : ndarray, shape (N, n)
+        Centres.
+    H : ndarray, shape (N, n, p), p >= 1
+        Generator matrices (columns are generators).
+    k : ndarray of int, shape (N,), optional
+        The generator halved in each zonotope. Default: the first generator holding the
+        largest ``|h_ij|`` (thesis (4.12)-(4.13)).
+
+    Returns
+    -------
+    H2 : ndarray, shape (N, n, p)
+        ``H`` with column ``k`` halved: the generators of both halves.
+    centres : [ndarray, ndarray], shapes (N, n)
+        ``fl(c - h_k/2)`` (left halves) and ``fl(c + h_k/2)`` (right halves).
+    errors : [ndarray, ndarray], shapes (N, n)
+        The exact rounding errors ``(c ∓ h_k/2) - centre`` of the centres (TwoSum).
+    extra : ndarray, shape (N, n)
+        ``h_k - 2 fl(h_k/2)``: nonzero only where halving a subnormal was inexact.
+        The halves with the errors and ``extra`` added as generators (or radii) cover the
+        zonotope exactly.
+    """
+    N = C.shape[0]
+    if k is None:
+        k = np.argmax(np.abs(H).max(axis=1), axis=1)  # (4.13): first column holding Max(H)
+    rows = np.arange(N)
+    h = H[rows, :, k]  # (N, n)
+    half = 0.5 * h
+    H2 = H.copy()
+    H2[rows, :, k] = half
+    centres, errors = [], []
+    for sgn in (-1.0, 1.0):
+        step = sgn * half
+        centres.append(C + step)
+        errors.append(two_sum_error(C, step))
+    return H2, centres, errors, h - 2.0 * half
+
+
 def midrad(lo, hi):
     """Midpoint (float) and radius (rounded up) with ``[lo, hi] ⊆ [mid - rad, mid + rad]``."""
     lo = np.asarray(lo, dtype=float)

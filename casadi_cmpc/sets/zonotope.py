@@ -253,7 +253,7 @@ class Zonotope(SetBase):
             raise ValueError(f"Unknown method '{method}'; valid: svd, pca, box")
         # v - c = fl(v - c) + err exactly (TwoSum); both parts are carried as "generators"
         D = V - c
-        err = _two_sum_error(V, -np.broadcast_to(c, V.shape))
+        err = zn.two_sum_error(V, -np.broadcast_to(c, V.shape))
         return cls(c, _outer_parallelotope(T, np.hstack([D.T, err.T]), points=True))
 
     # -------------------------------------------------------------- properties
@@ -783,27 +783,20 @@ class Zonotope(SetBase):
         m = G.shape[1]
         if m == 0:
             raise ValueError("a zonotope without generators (a point) cannot be bisected")
-        if index is None:
-            k = int(np.argmax(np.abs(G).max(axis=0)))
-        else:
+        k = None
+        if index is not None:
             k = int(index)
             if not -m <= k < m:
                 raise IndexError(f"index {index} out of range for {m} generators")
-            k %= m
-        h = G[:, k]
-        half = h * 0.5
-        H2 = G.copy()
-        H2[:, k] = half
-        cl = self._c - half
-        cr = self._c + half
+            k = np.array([k % m])
+        H2, centres, errors, extra = zn.halve_generator(self._c[None], G[None], k)
+        H2, extra = H2[0], extra[0]
         if not cover:
-            return Zonotope(cl, H2), Zonotope(cr, H2)
-        extra = h - 2.0 * half  # nonzero only when halving a subnormal was inexact
+            return Zonotope(centres[0][0], H2), Zonotope(centres[1][0], H2)
         out = []
-        for cc, sgn in ((cl, -1.0), (cr, 1.0)):
-            err = _two_sum_error(self._c, sgn * half)  # exact (p ± h/2) - cc
-            cols = [H2] + [v[:, None] for v in (err, extra) if np.any(v != 0)]
-            out.append(Zonotope(cc, np.hstack(cols)))
+        for cc, err in zip(centres, errors, strict=True):
+            cols = [H2] + [v[:, None] for v in (err[0], extra) if np.any(v != 0)]
+            out.append(Zonotope(cc[0], np.hstack(cols)))
         return out[0], out[1]
 
     def bisect_complete(self, method: str = "svd", cover: bool = True
@@ -991,7 +984,7 @@ class Zonotope(SetBase):
         if oc.size != self.dim:
             raise DimensionError(f"other has dimension {oc.size}; expected {self.dim}")
         c = self._c + oc
-        err = _two_sum_error(self._c, oc)
+        err = zn.two_sum_error(self._c, oc)
         cols = [self._G, oG] + ([err[:, None]] if np.any(err != 0) else [])
         return Zonotope(c, np.hstack(cols))
 
@@ -1024,13 +1017,6 @@ class Zonotope(SetBase):
 
 
 # ------------------------------------------------------------------------ 2-D and misc
-def _two_sum_error(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Exact ``(a + b) - fl(a + b)`` (Knuth's TwoSum; finite operands)."""
-    s = a + b
-    z = s - a
-    return (a - (s - z)) + (b - z)
-
-
 def _vertex_signs_2d(G: np.ndarray) -> np.ndarray:
     """Sign vectors of the vertices of a 2-D zonotope (nonzero generators G (2, m)), in
     counter-clockwise order: generators turned into the upper half-plane and sorted by angle;

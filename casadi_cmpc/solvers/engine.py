@@ -30,6 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .._bisect import bisect_widest, widest
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
@@ -94,32 +95,13 @@ def _concat_data(parts: list[Any]) -> dict[str, np.ndarray] | None:
     return {key: np.concatenate([p.data[key] for p in parts]) for key in keys[0]}
 
 
-def _widest(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per row of ``w`` (N, n): the largest entry and the lowest index holding it.
-
-    Column by column: numpy reductions along a short last axis are slow.
-    """
-    N, n = w.shape
-    if n == 0:
-        return np.zeros(N), np.zeros(N, dtype=np.intp)
-    if n > 8:
-        k = np.argmax(w, axis=1)
-        return w[np.arange(N), k], k
-    best = w[:, 0].copy()
-    k = np.zeros(N, dtype=np.intp)
-    for j in range(1, n):
-        col = w[:, j]
-        np.putmask(k, col > best, j)  # strictly greater: ties keep the lowest index
-        np.maximum(best, col, out=best)
-    return best, k
-
-
 @dataclass
 class BoxFrontier:
     """A batch of boxes as ``lo``, ``hi`` arrays of shape (N, n).
 
     ``bisect`` splits every box at ``split_ratio`` of its widest component (ties: lowest
-    index; widths relative to ``scale`` when given), thesis eqs. (4.2)-(4.4).
+    index; widths relative to ``scale`` when given), thesis eqs. (4.2)-(4.4), by
+    :func:`casadi_cmpc._bisect.bisect_widest`.
 
     ``data`` holds optional per-box arrays (first axis N) that travel with the boxes: ``take``
     selects their rows, ``concat`` joins them and both halves of a bisected box inherit the
@@ -178,51 +160,27 @@ class BoxFrontier:
 
     def width(self) -> np.ndarray:
         """Largest component width of each box (relative to ``scale`` when given), (N,)."""
-        w, self._split_dim = _widest(self._widths())
+        w, self._split_dim = widest(self._widths())
         return w
 
     def split(self) -> tuple[BoxFrontier, BoxFrontier]:
         """``(children, stuck)``: the two halves of every box that can be split, and the boxes
         whose widest component holds no float strictly between its bounds (not split)."""
-        lo, hi = self.lo, self.hi
-        n = lo.shape[1]
         k = self._split_dim
-        if k is None or len(k) != lo.shape[0]:
-            k = _widest(self._widths())[1]
-        flat = np.arange(lo.shape[0]) * n + k  # position of the split bound in lo.ravel()
-        a = lo.take(flat)
-        b = hi.take(flat)
-        r = self.split_ratio
-        if r == 0.5:
-            c = 0.5 * a  # 0.5 a + 0.5 b cannot overflow
-            c += 0.5 * b
-        else:
-            with np.errstate(over="ignore", invalid="ignore"):
-                c = a + r * (b - a)
-        ok = (a < c) & (c < b)
+        if k is None or len(k) != len(self):
+            k = widest(self._widths())[1]
+        new_lo, new_hi, _, ok = bisect_widest(self.lo, self.hi, k=k, ratio=self.split_ratio)
         data = self.data
-        all_ok = bool(ok.all())
-        if not all_ok:
-            with np.errstate(over="ignore", invalid="ignore"):
-                alt = (1.0 - r) * a + r * b  # b - a may overflow for huge boxes
-            c = np.where(ok, c, alt)
-            ok = (a < c) & (c < b)
-            all_ok = bool(ok.all())
-        if all_ok:
-            stuck = self._with(lo[:0], hi[:0], None if data is None else {
+        if ok.all():
+            stuck = self._with(self.lo[:0], self.hi[:0], None if data is None else {
                 key: v[:0] for key, v in data.items()})
         else:
             stuck = self.take(~ok)
             keep = np.flatnonzero(ok)
-            lo, hi, c = lo[keep], hi[keep], c[keep]
-            flat = np.arange(lo.shape[0]) * n + k[keep]
+            both = np.concatenate([keep, keep + len(self)])
+            new_lo, new_hi = new_lo.take(both, axis=0), new_hi.take(both, axis=0)
             if data is not None:
                 data = {key: v.take(keep, axis=0) for key, v in data.items()}
-        # left halves first, then right halves: [lo, lo] x [hi with the cut, hi]
-        new_lo = np.concatenate([lo, lo])
-        new_hi = np.concatenate([hi, hi])
-        new_hi.ravel()[flat] = c
-        new_lo.ravel()[flat + lo.size] = c
         if data is not None:  # both halves inherit what was proven on their parent
             data = {key: np.concatenate([v, v]) for key, v in data.items()}
         children = self._with(new_lo, new_hi, data)
@@ -569,12 +527,12 @@ class PairFrontier:
 
     def width(self) -> np.ndarray:
         """Largest relative width of each state box, (N,)."""
-        return _widest(self._x_widths())[0]
+        return widest(self._x_widths())[0]
 
     def _u_splittable(self) -> np.ndarray:
         if self.m == 0:
             return np.zeros(len(self), dtype=bool)
-        return _widest(self._u_widths())[0] > self.u_eps
+        return widest(self._u_widths())[0] > self.u_eps
 
     def reduce(self, labels: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
         """Group labels from pair labels (see the class notes): ``(labels, small)``."""
@@ -637,19 +595,10 @@ class PairFrontier:
             keep = P.take(~can)
             S = P.take(can)
             if len(S):
-                wu, k = _widest(S._u_widths())
-                k = k + n
-                rows = np.arange(len(S))
-                a, b = S.lo[rows, k], S.hi[rows, k]
-                c = 0.5 * a + 0.5 * b
-                ok = (a < c) & (c < b)
-                keep = PairFrontier._join([keep, S.take(~ok)]) if not ok.all() else keep
-                S, k, c = S.take(ok), k[ok], c[ok]
-                rows = np.arange(len(S))
-                lo2 = np.concatenate([S.lo, S.lo])
-                hi2 = np.concatenate([S.hi, S.hi])
-                hi2[rows, k] = c
-                lo2[rows + len(S), k] = c
+                lo2, hi2, ok = S._halves(widest(S._u_widths())[1] + n, 0.5)
+                if not ok.all():
+                    keep = PairFrontier._join([keep, S.take(~ok)])
+                    S = S.take(ok)
                 data = None if S.data is None else {
                     key: np.concatenate([v, v]) for key, v in S.data.items()}
                 parts.append(self._with(lo2, hi2, np.concatenate([S.group, S.group]), data))
@@ -675,21 +624,11 @@ class PairFrontier:
                 data = dict(data or {})
                 data.update({key: np.repeat(v, G, axis=0) for key, v in self.restart.items()})
             H = self._with(lo, hi, ug, data)
-            wx, k = _widest(H._x_widths())
-            rows = np.arange(G)
-            a, b = lo[rows, k], hi[rows, k]
-            r = self.split_ratio
-            c = 0.5 * a + 0.5 * b if r == 0.5 else a + r * (b - a)
-            ok = (a < c) & (c < b)
+            lo2, hi2, ok = H._halves(widest(H._x_widths())[1], self.split_ratio)
             if not ok.all():
                 stuck = H.take(~ok)
-                H, k, c = H.take(ok), k[ok], c[ok]
+                H = H.take(ok)
             G2 = len(H)
-            rows = np.arange(G2)
-            lo2 = np.concatenate([H.lo, H.lo])
-            hi2 = np.concatenate([H.hi, H.hi])
-            hi2[rows, k] = c
-            lo2[rows + G2, k] = c
             data = None if H.data is None else {
                 key: np.concatenate([v, v]) for key, v in H.data.items()}
             # fresh group ids, beyond those of the cell-splitting groups
@@ -702,6 +641,21 @@ class PairFrontier:
             _, dense = np.unique(children.group, return_inverse=True)
             children.group = dense.astype(np.intp)
         return children, stuck
+
+    def _halves(self, k: np.ndarray, ratio: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Both halves of every pair cut in the joint coordinate ``k`` (N,) at ``ratio``.
+
+        Returns ``(lo2, hi2, ok)``: the left halves then the right halves, shape
+        (2 M, n + m), of the ``M`` pairs where the cut lies strictly inside coordinate ``k``
+        (``ok``, shape (N,)); the other pairs are not split.
+        """
+        lo2, hi2, _, ok = bisect_widest(self.lo, self.hi, k=k, ratio=ratio)
+        if not ok.all():
+            keep = np.flatnonzero(ok)
+            both = np.concatenate([keep, keep + len(self)])
+            lo2, hi2 = lo2.take(both, axis=0), hi2.take(both, axis=0)
+        return lo2, hi2, ok
 
     def bisect(self) -> PairFrontier:
         children, stuck = self.split()

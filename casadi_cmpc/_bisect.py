@@ -1,0 +1,168 @@
+"""Bisection of batches of boxes along their widest coordinate (thesis eqs. (4.2)-(4.4)).
+
+Every box bisection of the library goes through :func:`bisect_widest`: the batched box
+helpers (:func:`casadi_cmpc.sets.paving.bisect_boxes`), the frontiers of the
+branch-and-bound engine (state boxes and control cells), the partitions of the semantic
+extension of modal intervals and the interval matrices of the invariant-zonotope search.
+The rule is the same everywhere:
+
+* the split coordinate is the *first* one holding the largest width (:func:`widest`);
+  what a width is (absolute, relative to a reference box, masked) is the caller's
+  choice, passed as the ``widths`` array;
+* the cut lies at ``ratio`` of the split coordinate, ``lo + ratio (hi - lo)``
+  (:func:`cut_points`);
+* the left halves ``[lo, c]`` come first, then the right halves ``[c, hi]``.
+
+It lives at the top of the package because every layer (``interval``, ``sets``,
+``solvers``, ``control``) bisects boxes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__: list[str] = []
+
+
+def widest(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``w``: the largest entry and the lowest index holding it.
+
+    Parameters
+    ----------
+    w : ndarray, shape (N, n)
+        Widths (any measure; NaN-free).
+
+    Returns
+    -------
+    best : ndarray, shape (N,)
+    k : ndarray of intp, shape (N,)
+        Ties go to the lowest index (thesis eq. (4.3)); zeros for ``n = 0``.
+
+    Notes
+    -----
+    Column by column for ``n <= 8``: numpy reductions along a short last axis are slow.
+    """
+    N, n = w.shape
+    if n == 0:
+        return np.zeros(N), np.zeros(N, dtype=np.intp)
+    if n > 8:
+        k = np.argmax(w, axis=1)
+        return w[np.arange(N), k], k
+    best = w[:, 0].copy()
+    k = np.zeros(N, dtype=np.intp)
+    for j in range(1, n):
+        col = w[:, j]
+        np.putmask(k, col > best, j)  # strictly greater: ties keep the lowest index
+        np.maximum(best, col, out=best)
+    return best, k
+
+
+def midpoint(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``(lo + hi) / 2`` rounded to nearest, inside ``[lo, hi]`` even for huge bounds.
+
+    Parameters
+    ----------
+    lo, hi : ndarray, same shape
+        Bounds with ``lo <= hi``.
+
+    Returns
+    -------
+    ndarray, same shape
+        The correctly rounded midpoint; ``0.5 lo + 0.5 hi`` where ``lo + hi`` overflows;
+        clipped to ``[lo, hi]``. NaN for ``(-inf, inf)``.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        c = (lo + hi) / 2.0
+        huge = ~np.isfinite(c) & np.isfinite(lo) & np.isfinite(hi)
+        if huge.any():
+            c = np.where(huge, 0.5 * lo + 0.5 * hi, c)
+    return np.clip(c, lo, hi)
+
+
+def cut_points(a: np.ndarray, b: np.ndarray, ratio: float = 0.5, exact_mid: bool = False
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Cuts ``a + ratio (b - a)`` of intervals ``[a, b]`` and where they split them.
+
+    Parameters
+    ----------
+    a, b : ndarray, shape (N,)
+        Bounds of the split coordinate, ``a <= b``.
+    ratio : float
+        Position of the cut in ``(0, 1)``.
+    exact_mid : bool
+        For ``ratio == 0.5``: True gives the correctly rounded midpoint :func:`midpoint`
+        (the public helper :func:`casadi_cmpc.sets.paving.bisect_boxes`); False gives
+        ``0.5 a + 0.5 b`` (the solvers' frontiers), which never overflows. The two differ
+        only when a bound is below ``2**-1021`` in magnitude (halving a subnormal rounds).
+
+    Returns
+    -------
+    c : ndarray, shape (N,)
+    ok : ndarray of bool, shape (N,)
+        ``a < c < b``: the cut splits the interval into two proper halves. Where the first
+        formula misses (``b - a`` overflows, or the rounding lands on a bound), the cut is
+        computed again as ``(1 - ratio) a + ratio b``.
+    """
+    r = float(ratio)
+    with np.errstate(over="ignore", invalid="ignore"):
+        if r != 0.5:
+            c = a + r * (b - a)
+        elif exact_mid:
+            c = midpoint(a, b)
+        else:
+            c = 0.5 * a  # 0.5 a + 0.5 b cannot overflow
+            c += 0.5 * b
+        ok = (a < c) & (c < b)
+        if not ok.all():
+            alt = (1.0 - r) * a + r * b  # b - a may overflow for huge boxes
+            c = np.where(ok, c, alt)
+            ok = (a < c) & (c < b)
+    return c, ok
+
+
+def bisect_widest(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray | None = None, *,
+                  k: np.ndarray | None = None, ratio: float = 0.5, exact_mid: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Bisect every box ``[lo_i, hi_i]`` along its widest coordinate.
+
+    Parameters
+    ----------
+    lo, hi : ndarray, shape (N, n)
+        Bounds of the boxes (C-contiguous float arrays).
+    widths : ndarray, shape (N, n), optional
+        The widths compared to choose the split coordinate (:func:`widest`): absolute
+        ``hi - lo``, relative to a reference box, or masked (e.g. ``-1`` for coordinates
+        that must not be split). Default: ``hi - lo``.
+    k : ndarray of int, shape (N,), optional
+        The split coordinates, when already known (``widths`` is then not used).
+    ratio : float
+        Position of the cut in ``(0, 1)`` (0.5: the midpoint).
+    exact_mid : bool
+        Midpoint rule for ``ratio == 0.5``, see :func:`cut_points`.
+
+    Returns
+    -------
+    lo2, hi2 : ndarray, shape (2N, n)
+        The left halves (rows ``0..N-1``: ``[lo_k, c]`` in coordinate ``k``) then the right
+        halves (rows ``N..2N-1``: ``[c, hi_k]``); the other coordinates are copied.
+    k : ndarray of intp, shape (N,)
+        The split coordinates.
+    ok : ndarray of bool, shape (N,)
+        Where the cut lies strictly inside the split coordinate. Elsewhere the halves are
+        built all the same (with a cut at or beyond a bound); callers drop or keep them.
+    """
+    N, n = lo.shape
+    if k is None:
+        if widths is None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                widths = hi - lo
+        k = widest(widths)[1]
+    flat = np.arange(N) * n + k  # position of the split bound in lo.ravel()
+    a = lo.take(flat)
+    b = hi.take(flat)
+    c, ok = cut_points(a, b, ratio, exact_mid)
+    lo2 = np.concatenate([lo, lo])
+    hi2 = np.concatenate([hi, hi])
+    hi2.ravel()[flat] = c
+    lo2.ravel()[flat + lo.size] = c
+    return lo2, hi2, k, ok
