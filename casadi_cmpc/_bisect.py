@@ -101,7 +101,9 @@ def cut_points(a: np.ndarray, b: np.ndarray, ratio: float = 0.5, exact_mid: bool
     ok : ndarray of bool, shape (N,)
         ``a < c < b``: the cut splits the interval into two proper halves. Where the first
         formula misses (``b - a`` overflows, or the rounding lands on a bound), the cut is
-        computed again as ``(1 - ratio) a + ratio b``.
+        computed again as ``(1 - ratio) a + ratio b``, and where that misses too (an
+        interval a few ulps wide) it is the float after ``a``. ``ok`` is False only for an
+        interval that holds no float strictly between its bounds.
     """
     r = float(ratio)
     with np.errstate(over="ignore", invalid="ignore"):
@@ -116,6 +118,9 @@ def cut_points(a: np.ndarray, b: np.ndarray, ratio: float = 0.5, exact_mid: bool
         if not ok.all():
             alt = (1.0 - r) * a + r * b  # b - a may overflow for huge boxes
             c = np.where(ok, c, alt)
+            ok = (a < c) & (c < b)
+        if not ok.all():  # a few ulps wide: the float after a, if it lies below b
+            c = np.where(ok, c, np.nextafter(a, np.inf))
             ok = (a < c) & (c < b)
     return c, ok
 

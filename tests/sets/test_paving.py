@@ -177,6 +177,21 @@ def test_relative_scaling_example_and_single_box_inputs():
     assert bisect_boxes(E)[0].shape == (0, 3, 2)
 
 
+@SETTINGS
+@given(st.floats(-1e300, 1e300, allow_nan=False), st.integers(2, 6),
+       st.floats(0.01, 0.99))
+def test_bisection_splits_every_box_that_holds_a_float_between_its_bounds(x, k, ratio):
+    """A box only a few ulps wide is split at any ratio: the cut falls back to
+    (1 - r) lo + r hi where lo + r (hi - lo) lands on a bound."""
+    hi = x
+    for _ in range(k):
+        hi = np.nextafter(hi, np.inf)
+    box = np.array([[[x, hi], [0.0, 0.0]]])
+    L, R = bisect_boxes(box, split_ratio=ratio)
+    c = L[0, 0, 1]
+    assert x < c < hi and R[0, 0, 0] == c and L[0, 0, 0] == x and R[0, 0, 1] == hi
+
+
 def test_bisection_refuses_bad_boxes_and_arguments():
     with pytest.raises(cm.UnboundedSetError, match="box 1 has component 0"):
         bisect_boxes(np.array([[[0.0, 1.0]], [[0.0, np.inf]]]))
