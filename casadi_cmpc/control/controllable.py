@@ -12,6 +12,7 @@ the batched branch-and-bound engine (:class:`~casadi_cmpc.solvers.engine.PairFro
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -97,7 +98,6 @@ class _Target:
         for S in members:
             if S.dim != n:
                 raise DimensionError(f"the target has dimension {S.dim}; the model has n = {n}")
-        self.model = model
         self.polys: list[tuple[Any, None, np.ndarray]] = []
         boxes = []
         self.zonos: list[Zonotope] = []
@@ -216,7 +216,6 @@ class _OneStepClassifier:
         self.W = W[None]  # (1, l, 2)
         self.w_points = w_points  # (C, l)
         self.obstacles = obstacles
-        self.n_pairs = 0
 
     def __call__(self, fr: PairFrontier) -> np.ndarray:
         with np.errstate(all="ignore"):
@@ -224,7 +223,6 @@ class _OneStepClassifier:
 
     def _classify(self, fr: PairFrontier) -> np.ndarray:
         N = len(fr)
-        self.n_pairs += N
         labels = np.zeros(N, dtype=np.int8)
         if N == 0:
             return labels
@@ -364,7 +362,7 @@ def _w_setup(model: Model, robust: bool, w_points: Any) -> tuple[np.ndarray, np.
 def _search(model: Model, target: _Target, X0: np.ndarray, eps: float, *, robust: bool,
             obstacles: list[Any], u_eps: float, max_cells: int, w_points: Any,
             x_scale: np.ndarray | None, max_boxes: int, time_limit: float | None,
-            progress: bool | None, desc: str) -> dict[str, Any]:
+            progress: bool | None, desc: str, executor: Any = None) -> dict[str, Any]:
     """One pair search from the state boxes X0 (N, n, 2); raw arrays of the outcome."""
     Wb, wpts, semantics = _w_setup(model, robust, w_points)
     clf = _OneStepClassifier(target, Wb, wpts, obstacles)
@@ -373,14 +371,14 @@ def _search(model: Model, target: _Target, X0: np.ndarray, eps: float, *, robust
                                  max_cells=max_cells,
                                  data={"witness": np.full((N0, model.m), np.nan)})
     out = branch_and_bound(fr, clf, eps, max_boxes=max_boxes, time_limit=time_limit,
-                           keep_outer=True, progress=progress, desc=desc)
+                           keep_outer=True, progress=progress, desc=desc, executor=executor)
     bnd = out.boundary.x_boxes
     if bnd.shape[0]:  # leftovers of a stopped search hold several cells per box
         bnd = np.unique(bnd, axis=0)
     return {"inner": out.inner.x_boxes, "witness": out.inner.data["witness"],
             "boundary": bnd, "outer": out.outer.x_boxes, "status": out.status,
             "message": out.message, "levels": out.levels, "n_classified": out.n_classified,
-            "n_discarded": out.n_discarded, "elapsed": out.elapsed, "n_pairs": clf.n_pairs,
+            "n_discarded": out.n_discarded, "elapsed": out.elapsed, "n_pairs": out.n_classified,
             "semantics": semantics}
 
 
@@ -402,7 +400,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
                  u_eps: float = 1 / 16, max_cells: int = 64, w_points: Any = None,
                  relative: bool = False, max_boxes: int = 2_000_000,
                  time_limit: float | None = None, progress: bool | None = None,
-                 options: dict[str, Any] | None = None) -> OneStepSet:
+                 options: dict[str, Any] | None = None, executor: Any = None) -> OneStepSet:
     """Inner approximation of the one-step controllable set ``K(X, T)`` (Alg 4.6, 6.1, 5.2).
 
     Parameters
@@ -443,6 +441,13 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
         (the rest is boundary) and has status BUDGET.
     options : dict, optional
         For ``method="modal"``: passed to :func:`casadi_cmpc.quantified_sivia`.
+    executor : concurrent.futures.Executor, optional
+        Classify the large levels of the search on this executor: a
+        ``ProcessPoolExecutor(n)`` on this machine, or ``distributed.Client(address)
+        .get_executor()`` on a Dask cluster (workers with casadi_cmpc installed). The result
+        is that of the serial run (the same boxes in the same order; see
+        :mod:`casadi_cmpc.solvers._parallel` for the one caveat, libm functions). Not for
+        ``method="modal"``.
 
     Returns
     -------
@@ -485,6 +490,9 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     D = _domain(model, X)
     obs = _as_obstacles(obstacles, model.n)
     if meth == "modal":
+        if executor is not None:
+            raise ValueError("executor is for the general method (the modal one runs in "
+                             "this process)")
         return _modal(model, target, eps, D, robust, relative, max_boxes, time_limit,
                       progress, options, obs)
     if options:
@@ -494,7 +502,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     r = _search(model, T, D.as_array()[None], eps, robust=robust, obstacles=obs,
                 u_eps=float(u_eps), max_cells=int(max_cells), w_points=w_points,
                 x_scale=scale, max_boxes=max_boxes, time_limit=time_limit,
-                progress=progress, desc="one-step set")
+                progress=progress, desc="one-step set", executor=executor)
     pav = Paving(inner=r["inner"], boundary=r["boundary"], outside=r["outer"], domain=D,
                  n_discarded=r["n_discarded"])
     msg = (f"{pav.n_inner} state boxes proven ({r['semantics']}), {pav.n_boundary} "
@@ -612,9 +620,7 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
         return Certificate("assumed", None, "T is control invariant",
                            "assume_invariant=True: not proven; the sets are then inner "
                            "approximations of the i-step sets only if T is invariant")
-    # the nominal w is the centre the one-step sets use (see _w_setup)
-    Wc = _w_setup(model, robust, None)[0] if model.l else None
-    W_need = (model.W if robust else Box(Wc[:, 0], Wc[:, 1])) if model.l else None
+    W_need = _terminal_W(model, robust)
     if certificate is not None:
         from .invariance import check_about
 
@@ -647,6 +653,41 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
     return cert
 
 
+def _terminal_W(model: Model, robust: bool) -> Box | None:
+    """The disturbance box T is proven invariant for: W (robust), the thin box at the centre
+    of W that the one-step sets use (nominal, see :func:`_w_setup`), None without w."""
+    if not model.l:
+        return None
+    if robust:
+        return model.W
+    Wc = _w_setup(model, False, None)[0]
+    return Box(Wc[:, 0], Wc[:, 1])
+
+
+def _stored_terminal(model: Model, saved: Any, law: Any, certificate: Any,
+                     assume_invariant: bool, robust: bool) -> dict[str, Any] | None:
+    """The entries of T's proof in a checkpoint's info (``terminal_*``, ``model_key``) when
+    they are what certifying T under ``law`` gives (T proven, for this law and W): then T
+    is not certified again. None otherwise (no checkpoint, or T is to be certified,
+    assumed invariant or backed by a given certificate)."""
+    if saved is None or law is None or certificate is not None or assume_invariant:
+        return None
+    from .invariance import law_identity
+
+    try:
+        law_key = law_identity(model, law)["law_key"]
+    except Exception:  # a bad law: certifying reports it
+        return None
+    W = _terminal_W(model, robust)
+    expected = {"terminal_certificate": "proved", "terminal_law_key": law_key,
+                "terminal_W": None if W is None else [np.asarray(W.lo).tolist(),
+                                                      np.asarray(W.hi).tolist()]}
+    info = saved.info
+    if any(info.get(k) != v for k, v in expected.items()):
+        return None
+    return {k: v for k, v in info.items() if k == "model_key" or k.startswith("terminal_")}
+
+
 def _terminal_info(model: Model, cert: Any) -> dict[str, Any]:
     """What the sequence stores of T's certificate: the law it proves (text, key,
     serialized Function), the disturbance box it covers and the claim."""
@@ -669,7 +710,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                       assume_invariant: bool = False, X: Any = None, obstacles: Any = None,
                       u_eps: float = 1 / 16, max_cells: int = 64, w_points: Any = None,
                       until: Any = None, max_boxes: int = 2_000_000,
-                      time_limit: float | None = None, progress: bool | None = None) -> Any:
+                      time_limit: float | None = None, progress: bool | None = None,
+                      checkpoint: str | os.PathLike[str] | None = None) -> Any:
     """The sequence ``K_0 = T, K_{i+1} = K(X, K_i)`` of (robust) controllable sets (Alg 4.6,
     6.1, (6.8)), each a proven inner approximation, to convergence.
 
@@ -704,7 +746,35 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     max_boxes, time_limit
         Budget of each step (pairs; seconds).
     progress : bool or None
-        tqdm bar over the steps.
+        tqdm bar over the steps: the steps done, the boxes proven (and the new ones), the
+        mean time of the last steps and, once the number of new boxes per step declines,
+        an estimate of the time left (assuming the decline goes on geometrically until no
+        new box is proven). ``False``: silent.
+    checkpoint : str or Path, optional
+        A file (``.npz``; ``.json`` also works) that makes the run resumable. After each
+        completed step the sequence so far is written there (by :meth:`SetSequence.save`,
+        with the state boxes the next step searches and the key of the problem) through a
+        partial file in the same directory renamed over it: Ctrl-C, ``time_limit`` or a
+        killed process lose at most the step in progress, and a write cut short leaves the
+        previous checkpoint whole. When the file exists, the run resumes after its last
+        completed step, and the result equals that of an uninterrupted run (the same boxes
+        and controls bit for bit, statuses, ``converged_at`` and number of steps). When the
+        run completes the file holds the complete sequence, so a second call returns it
+        without searching (nor certifying T again, when T was proven under the same
+        ``law``). A step stopped by ``max_boxes`` or ``time_limit`` is not written: the next
+        run computes it again. ``max_steps``, ``until``, ``max_boxes``, ``time_limit`` and
+        ``progress`` may differ from run to run (the stored steps are replayed under the new
+        stopping rules).
+
+        The file must be a checkpoint of the same problem: the model's map f, X, U, W, T,
+        eps, robust, polytopic (and its method), obstacles, u_eps, max_cells, the points of
+        W that discard control cells, how T's invariance is established (proved under which
+        law for which W, or assumed) and the casadi_cmpc version. A checkpoint of another
+        problem, or a file that is no checkpoint, is **refused**: a
+        :class:`~casadi_cmpc.control._checkpoint.CheckpointError` (a ``ValueError``) names
+        the parts that differ, and the file is left untouched. It is not ignored, since
+        ignoring it would either overwrite work that may have taken hours (after a typo in
+        eps, say) or run without the checkpoint the caller asked for.
 
     Returns
     -------
@@ -712,7 +782,13 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         ``sets[i]`` = K_i (a :class:`~casadi_cmpc.SetUnion` of T and the proven boxes, or
         the polytopes), ``steps`` (boxes first proven at each step, with proving controls),
         ``converged_at`` (the first i with K_i = K_{i-1}: no new box proven), ``status``,
-        ``level(x)``, ``save``/``load``, ``plot``.
+        ``level(x)``, ``save``/``load``, ``plot``. With ``checkpoint``, ``info["resumed_steps"]``
+        is the number of steps read from the checkpoint instead of searched.
+
+    Raises
+    ------
+    CheckpointError
+        ``checkpoint`` is a file of another problem, or no checkpoint (see above).
 
     Notes
     -----
@@ -723,6 +799,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     """
     from tqdm.auto import tqdm
 
+    from ._checkpoint import Checkpoint, problem_key, progress_text, terminal_part
     from .linear_sets import SetSequence
 
     if not isinstance(model, Model):
@@ -744,13 +821,25 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     obs = _as_obstacles(obstacles, model.n)
     pts = None if until is None else np.atleast_2d(np.asarray(until, dtype=float))
     t0 = time.perf_counter()
-    cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
-    _, _, semantics = _w_setup(model, robust, w_points)
+    _, wpts, semantics = _w_setup(model, robust, w_points)
+    ck = None if checkpoint is None else Checkpoint(checkpoint)
+    key = problem_key(model, T, D, eps=eps, robust=robust, polytopic=polytopic,
+                      polytopic_method=polytopic_method, obstacles=obs, u_eps=u_eps,
+                      max_cells=max_cells, w_points=wpts)
+    saved = None if ck is None else ck.load(key)
+    tinfo = _stored_terminal(model, saved, law, certificate, assume_invariant, robust)
+    if tinfo is None:
+        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
+        tinfo = {"terminal_certificate": cert.label, **_terminal_info(model, cert)}
+    key.append(terminal_part(tinfo))
+    done: list[dict[str, Any]] = []  # steps completed in the checkpoint (replayed)
+    if saved is not None:
+        ck.check(saved, key)
+        done, saved_frontier = ck.resume_state(saved, model.n)
     seq = SetSequence(sets=[T], info={
         "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
-        "polytopic": bool(polytopic), "terminal_certificate": cert.label,
-        "state_names": [f"x{i + 1}" for i in range(model.n)],
-        **_terminal_info(model, cert)})
+        "polytopic": bool(polytopic), "terminal_certificate": tinfo["terminal_certificate"],
+        "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo})
     frontier = D.as_array()[None]
     inner = np.zeros((0, model.n, 2))
     target: Any = T
@@ -763,20 +852,29 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     try:
         for i in range(1, max_steps + 1):
             ts = time.perf_counter()
-            r = _search(model, _Target(model, target), frontier, eps, robust=robust,
-                        obstacles=obs, u_eps=u_eps, max_cells=max_cells, w_points=w_points,
-                        x_scale=None, max_boxes=max_boxes, time_limit=time_limit,
-                        progress=False, desc=f"K_{i}")
-            new = r["inner"]
+            searched = i > len(done)
+            if not searched:  # completed in the checkpoint: its step, as computed then
+                step, proved = done[i - 1], True
+                if i == len(done):
+                    frontier = saved_frontier
+            else:
+                r = _search(model, _Target(model, target), frontier, eps, robust=robust,
+                            obstacles=obs, u_eps=u_eps, max_cells=max_cells,
+                            w_points=w_points, x_scale=None, max_boxes=max_boxes,
+                            time_limit=time_limit, progress=False, desc=f"K_{i}")
+                frontier = np.concatenate([r["outer"], r["boundary"]])
+                step = {"boxes": r["inner"], "witness": r["witness"], "polytope": None,
+                        "boundary": r["boundary"].shape[0], "seconds": 0.0}
+                proved = r["status"] == Status.PROVED
+            new = step["boxes"]
             inner = np.concatenate([inner, new])
-            frontier = np.concatenate([r["outer"], r["boundary"]])
-            step = {"boxes": new, "witness": r["witness"], "polytope": None,
-                    "boundary": r["boundary"].shape[0], "seconds": 0.0}
             if polytopic and new.shape[0]:
-                from .polytopic import inner_polytope
+                if searched:
+                    from .polytopic import inner_polytope
 
-                P = _as_polytope(inner_polytope(inner, method=polytopic_method))
-                step["polytope"] = P
+                    step["polytope"] = _as_polytope(inner_polytope(inner,
+                                                                   method=polytopic_method))
+                P = step["polytope"]
                 if P is not None and not P.is_empty():
                     # members proven inside others may be dropped: a smaller target is sound
                     polys = [Q for Q in polys if not Q.is_subset(P)] + [P]
@@ -788,21 +886,27 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                 K = seq.sets[-1]
             else:
                 K = SetUnion([T, Paving(inner=inner, domain=D)], dim=model.n)
-            step["seconds"] = time.perf_counter() - ts
+            if searched:
+                step["seconds"] = time.perf_counter() - ts
             seq.steps.append(step)
             seq.sets.append(K)
-            bar.set_postfix_str(f"K_{i}: {int(inner.shape[0])} boxes; stops when no new box "
-                                f"is proven (at most {max_steps} steps)", refresh=False)
-            bar.update(1)
-            if r["status"] != Status.PROVED:
-                seq.status = "budget"
-                break
-            if new.shape[0] == 0:
+            stop = None
+            if not proved:
+                stop = "budget"
+            elif new.shape[0] == 0:
+                stop = "converged"
                 seq.converged_at = i
-                seq.status = "converged"
-                break
-            if pts is not None and np.all(K.contains(pts)):
-                seq.status = "until"
+            elif pts is not None and np.all(K.contains(pts)):
+                stop = "until"
+            if ck is not None and searched and proved:
+                ck.write(seq, key, frontier,
+                         stop or ("max_steps" if i == max_steps else "interrupted"))
+            bar.set_postfix_str(progress_text(
+                i, int(inner.shape[0]), [st["boxes"].shape[0] for st in seq.steps],
+                [st["seconds"] for st in seq.steps], max_steps), refresh=False)
+            bar.update(1)
+            if stop is not None:
+                seq.status = stop
                 break
             target = K
     except KeyboardInterrupt:
@@ -812,6 +916,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         scope.close()
         bar.close()
     seq.info["seconds"] = time.perf_counter() - t0
+    if ck is not None:
+        seq.info["resumed_steps"] = min(len(done), len(seq.steps))
     return seq
 
 

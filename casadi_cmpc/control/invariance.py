@@ -287,7 +287,7 @@ def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fu
 def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = None,
                       max_boxes: int = 200_000, time_limit: float | None = None,
                       samples: int = 64, seed: int = 0,
-                      progress: bool | None = None) -> Certificate:
+                      progress: bool | None = None, executor: Any = None) -> Certificate:
     """Prove that ``S`` is (robustly) invariant under ``u = law(x)`` (thesis Alg 4.3).
 
     The claim: for every ``x in S`` and every ``w in W``, ``f(x, law(x), w) in S`` and
@@ -319,6 +319,11 @@ def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = No
     samples, seed
         Random points of S, and points per unresolved piece, tried as counterexamples.
 
+    executor : concurrent.futures.Executor, optional
+        Run the two set inversions' large levels on this executor
+        (``ProcessPoolExecutor(n)``, or ``distributed.Client(address).get_executor()``);
+        the certificate is that of the serial run.
+
     Returns
     -------
     Certificate
@@ -343,7 +348,7 @@ def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = No
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
     _check_target(S, model.n)
     return _certify(model, _closed(model, law), S, eps, W, max_boxes, time_limit, samples,
-                    seed, progress, law=law)
+                    seed, progress, law=law, executor=executor)
 
 
 def _closed(model: Model, law: Any) -> tuple[Model, Any]:
@@ -430,14 +435,14 @@ def check_about(cert: Any, model: Model, S: Any, W: Any, law: Any = None) -> str
 
 def _certify(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W: Any,
              max_boxes: int, time_limit: float | None, samples: int, seed: int,
-             progress: bool | None, law: Any = None) -> Certificate:
+             progress: bool | None, law: Any = None, executor: Any = None) -> Certificate:
     """certify_invariant after validation, with the closed loop given; the certificate
     records what it is about (see :attr:`Certificate.about`)."""
     import dataclasses
 
     Wb = W if W is not None else model.W
     cert = _certify_core(model, closed, S, eps, Wb, max_boxes, time_limit, samples, seed,
-                         progress)
+                         progress, executor)
     about: dict[str, Any] = {"kind": "invariance", "model": model.name,
                              "model_key": model_key(model), "set": S,
                              "W": Wb if model.l else None,
@@ -450,7 +455,7 @@ def _certify(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W: Any
 
 def _certify_core(model: Model, closed: tuple[Model, Any], S: Any, eps: float, Wb: Any,
                   max_boxes: int, time_limit: float | None, samples: int, seed: int,
-                  progress: bool | None) -> Certificate:
+                  progress: bool | None, executor: Any = None) -> Certificate:
     from ..solvers.zonotope_sivia import zonotope_sivia
 
     t0 = time.perf_counter()
@@ -480,9 +485,11 @@ def _certify_core(model: Model, closed: tuple[Model, Any], S: Any, eps: float, W
             "skipped; no counterexample found among sampled points", details)
     runs = {
         "state set": zonotope_sivia(cl, Z0, S, eps, W=Wb, max_boxes=max_boxes,
-                                    time_limit=time_limit, progress=progress),
+                                    time_limit=time_limit, progress=progress,
+                                    executor=executor),
         "input bound": zonotope_sivia(law_fun, Z0, model.U, eps, max_boxes=max_boxes,
-                                      time_limit=time_limit, progress=progress),
+                                      time_limit=time_limit, progress=progress,
+                                      executor=executor),
     }
     unresolved = []
     for name, pav in runs.items():

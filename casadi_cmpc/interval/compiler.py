@@ -16,7 +16,9 @@ functions per Function object.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import pickle
 import sys
 import threading
 import warnings
@@ -394,6 +396,27 @@ class _ScalarCodegen(_Codegen):
         return "\n".join(src) + "\n"
 
 
+_REBUILT: OrderedDict[str, Any] = OrderedDict()  # pickled spec hash -> InclusionFunction
+
+
+def _rebuild_inclusion(spec: bytes) -> InclusionFunction:
+    """The InclusionFunction of a pickled spec, built once per process (last 64 kept)."""
+    key = hashlib.sha1(spec).hexdigest()
+    F = _REBUILT.get(key)
+    if F is None:
+        fun, kind, backend, derived, evaluate = pickle.loads(spec)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", CmpcWarning)  # said once where it was built
+            F = InclusionFunction(fun, kind, backend=backend, derived_outputs=derived,
+                                  evaluate=evaluate)
+        _REBUILT[key] = F
+        while len(_REBUILT) > 64:
+            _REBUILT.popitem(last=False)
+    else:
+        _REBUILT.move_to_end(key)
+    return F
+
+
 class InclusionFunction:
     """A batched interval inclusion function compiled from a CasADi SX Function.
 
@@ -506,6 +529,9 @@ class InclusionFunction:
             raise ValueError(f"unknown inclusion kind '{kind}'; valid kinds: {', '.join(_KINDS)}")
         backend = _check_backend(backend)
         fun = _as_sx_function(fun, allow_param=True)
+        # what rebuilds it in another process (pickle): the graph and the options
+        self._spec = (fun, kind, backend, tuple(int(i) for i in derived_outputs),
+                      None if evaluate is None else tuple(int(i) for i in evaluate))
         self._param = isinstance(fun, _dv.ParamFunction)
         if derived_outputs or evaluate is not None:
             if kind != "natural":
@@ -561,6 +587,12 @@ class InclusionFunction:
         n_instr = self.fun.n_instructions() + (
             self._g.n_instructions() if not self._is_natural else 0)
         self._large = n_instr >= self.native_large  # small batches gain from native too
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        """Pickled as its CasADi graph and options; rebuilt once per process (the compiled
+        evaluators and the native kernel are then reused by every later copy)."""
+        fun, kind, backend, derived, evaluate = self._spec
+        return _rebuild_inclusion, (pickle.dumps((fun, kind, backend, derived, evaluate)),)
 
     # ---------------------------------------------------------------- natural
     def _inputs(self, args: Sequence[Any]) -> tuple[list[np.ndarray], int]:

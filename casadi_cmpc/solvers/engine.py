@@ -34,6 +34,7 @@ from .._bisect import bisect_widest, widest
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
+from ._parallel import LevelRunner
 
 __all__ = ["INNER", "OUTER", "UNDECIDED", "DROPPED", "Status", "BoxFrontier", "PairFrontier",
            "BnBOutcome", "branch_and_bound"]
@@ -233,8 +234,8 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                      max_boxes: int = 5_000_000, time_limit: float | None = None,
                      keep_outer: bool = True, progress: bool | None = None,
                      desc: str = "branch and bound",
-                     on_level: Callable[[int, Any, np.ndarray], None] | None = None
-                     ) -> BnBOutcome:
+                     on_level: Callable[[int, Any, np.ndarray], None] | None = None,
+                     executor: Any = None) -> BnBOutcome:
     """Breadth-first branch and bound over a frontier, one vectorised classification per level.
 
     Parameters
@@ -256,6 +257,11 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     on_level : callable, optional
         ``on_level(level, frontier, labels)`` after each classification (e.g. to update a
         bound from the classified boxes).
+    executor : concurrent.futures.Executor, optional
+        Classify the large levels in chunks on this executor (a ``ProcessPoolExecutor``, or
+        ``distributed.Client(...).get_executor()``); the outcome is that of the serial
+        search (see :mod:`casadi_cmpc.solvers._parallel`). The classifier must be picklable
+        (closures: with cloudpickle) and label each element from that element alone.
 
     Returns
     -------
@@ -280,6 +286,7 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     bar = tqdm(total=None, desc=desc, unit="box", disable=progress is False,
                delay=0 if progress else 2.0, leave=False)
     n_classified = 0
+    runner = LevelRunner(executor)
     scope = InterruptScope()
     try:
         while len(frontier):
@@ -289,7 +296,7 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             if time_limit is not None and time.perf_counter() - t0 > time_limit:
                 status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
                 break
-            labels = np.asarray(classify(frontier), dtype=np.int8)
+            labels = runner(classify, frontier)
             reduce = getattr(frontier, "reduce", None)
             small = None
             if reduce is not None:  # grouped elements: labels and sizes of the groups

@@ -405,7 +405,7 @@ def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
           W: Any = None, kind: str = "natural", open_target: bool = False,
           split_ratio: float = 0.5, relative: bool = False, max_boxes: int = 5_000_000,
           time_limit: float | None = None, keep_outer: bool = True, contract: bool = False,
-          progress: bool | None = None) -> SetResult:
+          progress: bool | None = None, executor: Any = None) -> SetResult:
     """Set inversion via interval analysis: pave ``{x in X0 : f(x) in Y}`` (thesis Alg 4.1).
 
     Parameters
@@ -456,6 +456,11 @@ def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
         test alone is usually cheaper.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+    executor : concurrent.futures.Executor, optional
+        Classify the large levels on this executor (``ProcessPoolExecutor(n)``, or
+        ``distributed.Client(address).get_executor()``); the result is that of the serial
+        run (:mod:`casadi_cmpc.solvers._parallel`). Not with ``contract=True`` (the
+        contractor keeps the slabs it removes).
 
     Returns
     -------
@@ -535,6 +540,8 @@ def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
         x0 = np.concatenate([x0, Wb[None]], axis=1)
         scale = np.concatenate([np.ones(n - l) if scale is None else scale, np.full(l, np.inf)])
     classify = image_classifier(F, Y, open_target)
+    if contract and executor is not None:
+        raise ValueError("contract=True runs in this process: leave executor unset")
     if contract:
         from ..interval.contractor import contractor
 
@@ -542,7 +549,8 @@ def sivia(f: Any, X0: Any = None, Y: Any = None, eps: float | None = None, *,
         classify = _Contracting(contractor(F.fun, target), classify, keep_outer)
     fr = BoxFrontier.from_boxes(x0, scale=scale, split_ratio=r)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
-                           keep_outer=keep_outer, progress=progress, desc="sivia")
+                           keep_outer=keep_outer, progress=progress, desc="sivia",
+                           executor=executor)
     parts = [out.inner.boxes, out.boundary.boxes, out.outer.boxes]
     n_discarded = out.n_discarded
     if contract:

@@ -284,7 +284,7 @@ def _bounding_parallelotope(P: Polytope, method: str = "svd",
 def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
                    box_form: str | None = "natural", max_boxes: int = 2_000_000,
                    time_limit: float | None = None, keep_outer: bool = True,
-                   progress: bool | None = None) -> SetResult:
+                   progress: bool | None = None, executor: Any = None) -> SetResult:
     r"""Set inversion via zonotope geometry: pave ``{x in X0 : f(x) in Y}`` (thesis Alg 4.3).
 
     Parameters
@@ -316,6 +316,11 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
         Keep the discarded zonotopes for drawing (always counted).
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+
+    executor : concurrent.futures.Executor, optional
+        Classify the large levels on this executor (see
+        :func:`casadi_cmpc.solvers.engine.branch_and_bound`); the result is that of the
+        serial run.
 
     Returns
     -------
@@ -372,7 +377,8 @@ def zonotope_sivia(f: Any, X0: Any, Y: Any, eps: float, *, W: Any = None,
         raise InvalidBoundsError("X0 is a single point (a zonotope without generators)")
     fr = ZonotopeFrontier.from_zonotopes(Z0)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
-                           keep_outer=keep_outer, progress=progress, desc="zonotope sivia")
+                           keep_outer=keep_outer, progress=progress, desc="zonotope sivia",
+                           executor=executor)
     return _zonotope_result(out, Z0, "zonotope sivia (Alg 4.3)")
 
 

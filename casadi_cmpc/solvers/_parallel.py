@@ -1,0 +1,178 @@
+"""Classification of a branch-and-bound level on a ``concurrent.futures`` executor.
+
+A level's frontier is cut into contiguous chunks; each chunk is classified by a worker
+(a :class:`~concurrent.futures.ProcessPoolExecutor` process, or a Dask worker through
+``distributed.Client.get_executor()``), and the labels (and the per-element data a classifier
+writes, such as proving controls) are put back in order. Everything else of the search (the
+reduction of grouped labels, bisection, budgets, the record of finished boxes) stays in the
+driver, so the outcome is that of the serial search: the same boxes in the same order,
+provided the classifier labels each element from that element alone (every classifier of the
+library does), and that its interval evaluations give the same bits in the worker as in the
+driver (they do for operations that every backend evaluates the same way: ``+ - *``, squares,
+constants; for libm functions the numpy, scalar and native backends may differ in the last
+bits of a bound, which can change a label at a box within a few ulps of a decision).
+
+Chunk sizes follow the measured cost: about :data:`TARGET_S` seconds of work per task (a Dask
+task costs about 1 ms of overhead, a process-pool task less), from the cost per element of
+the previous level; levels with less work than two tasks run in the driver.
+
+The classifier is serialised once per level (pickle; closures need ``cloudpickle``, which the
+``[dask]`` extra installs) and rebuilt once per worker process (kept by a hash of its bytes),
+so that its compiled evaluators and their native kernels are reused across chunks and levels.
+A worker process that dies is replaced by classifying its chunk in the driver (with a
+warning); no chunk is lost, and an exception raised by the classifier itself is raised again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+import time
+import warnings
+from collections import OrderedDict
+from concurrent.futures import Executor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..exceptions import CmpcWarning
+
+__all__ = ["LevelRunner", "TARGET_S"]
+
+TARGET_S = 0.1  # seconds of classification per task
+MIN_CHUNK = 64  # elements: below this a task is not worth sending
+
+_WORKER_CACHE: OrderedDict[str, Any] = OrderedDict()  # classifier bytes hash -> classifier
+
+
+def _dumps(obj: Any) -> bytes:
+    """The classifier's bytes: pickle (CasADi expressions in one shared context, so that
+    their symbols stay the same), cloudpickle for closures."""
+    try:
+        with ca.global_pickle_context():
+            return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    except (pickle.PicklingError, AttributeError, TypeError) as exc:
+        try:
+            import cloudpickle
+        except ImportError:
+            raise TypeError(
+                f"the classifier cannot be sent to worker processes ({exc}); install "
+                "cloudpickle (pip install 'casadi_cmpc[dask]') or run without executor") \
+                from exc
+        with ca.global_pickle_context():
+            return cloudpickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def _classifier(blob: bytes, key: str) -> Any:
+    clf = _WORKER_CACHE.get(key)
+    if clf is None:
+        with ca.global_unpickle_context():
+            clf = _WORKER_CACHE[key] = pickle.loads(blob)
+        while len(_WORKER_CACHE) > 8:
+            _WORKER_CACHE.popitem(last=False)
+    else:
+        _WORKER_CACHE.move_to_end(key)
+    return clf
+
+
+def _classify_chunk(blob: bytes, key: str, chunk: Any) -> tuple[np.ndarray, Any, float]:
+    """Worker side: (labels, the chunk's per-element data, seconds)."""
+    t0 = time.perf_counter()
+    labels = np.asarray(_classifier(blob, key)(chunk), dtype=np.int8)
+    return labels, getattr(chunk, "data", None), time.perf_counter() - t0
+
+
+def _workers(executor: Executor) -> int:
+    n = getattr(executor, "_max_workers", None)  # ProcessPoolExecutor, ThreadPoolExecutor
+    if n is None:
+        client = getattr(executor, "_client", None)  # distributed.client.ClientExecutor
+        try:
+            n = sum(client.nthreads().values()) if client is not None else None
+        except Exception:  # noqa: BLE001 - a client that cannot say: assume two
+            n = None
+    return max(int(n or 2), 1)
+
+
+class LevelRunner:
+    """``runner(classify, frontier) -> labels``: one level classified serially or on an
+    executor (see the module notes).
+
+    Parameters
+    ----------
+    executor : concurrent.futures.Executor or None
+        None: every level in the driver.
+    target_s : float, optional
+        Seconds of work per task (default :data:`TARGET_S`).
+    """
+
+    def __init__(self, executor: Executor | None, target_s: float | None = None) -> None:
+        if executor is not None and not callable(getattr(executor, "submit", None)):
+            raise TypeError("executor must be a concurrent.futures.Executor (e.g. "
+                            "ProcessPoolExecutor(2), or distributed.Client(...)"
+                            ".get_executor()); got " + type(executor).__name__)
+        self.executor = executor
+        self.target_s = float(TARGET_S if target_s is None else target_s)
+        self.cost: float | None = None  # seconds per element, measured
+        self.n_workers = _workers(executor) if executor is not None else 1
+        self.n_tasks = 0
+        self._blob: tuple[int, bytes, str] | None = None
+
+    def __call__(self, classify: Any, frontier: Any) -> np.ndarray:
+        N = len(frontier)
+        if self.executor is None or N < 2 * MIN_CHUNK or (
+                self.cost is not None and N * self.cost < 2 * self.target_s):
+            t0 = time.perf_counter()
+            labels = np.asarray(classify(frontier), dtype=np.int8)
+            if N:
+                self._measure((time.perf_counter() - t0) / N)
+            return labels
+        return self._parallel(classify, frontier, N)
+
+    def _measure(self, c: float) -> None:
+        self.cost = c if self.cost is None else 0.5 * self.cost + 0.5 * c
+
+    def _serialised(self, classify: Any) -> tuple[bytes, str]:
+        if self._blob is None or self._blob[0] != id(classify):
+            blob = _dumps(classify)
+            self._blob = (id(classify), blob, hashlib.sha1(blob).hexdigest())
+        return self._blob[1], self._blob[2]
+
+    def _parallel(self, classify: Any, frontier: Any, N: int) -> np.ndarray:
+        blob, key = self._serialised(classify)
+        if self.cost is None:
+            size = -(-N // (2 * self.n_workers))
+        else:
+            size = int(self.target_s / max(self.cost, 1e-9))
+            size = min(size, -(-N // self.n_workers))  # every worker gets a share
+        size = max(size, MIN_CHUNK)
+        bounds = [(a, min(a + size, N)) for a in range(0, N, size)]
+        chunks = [frontier.take(np.arange(a, b)) for a, b in bounds]
+        futures = [self.executor.submit(_classify_chunk, blob, key, c) for c in chunks]
+        self.n_tasks += len(futures)
+        labels = np.empty(N, dtype=np.int8)
+        spent = 0.0
+        try:
+            for (a, b), chunk, fut in zip(bounds, chunks, futures, strict=True):
+                try:
+                    lab, data, dt = fut.result()
+                except BrokenProcessPool as exc:
+                    warnings.warn(f"a worker process died ({exc}); its chunk of {b - a} "
+                                  "elements is classified in the driver", CmpcWarning,
+                                  stacklevel=4)
+                    t0 = time.perf_counter()
+                    lab = np.asarray(classify(chunk), dtype=np.int8)
+                    data, dt = getattr(chunk, "data", None), time.perf_counter() - t0
+                    self.executor = None  # a broken pool takes no more tasks
+                labels[a:b] = lab
+                if data:
+                    for name, v in data.items():
+                        frontier.data[name][a:b] = v
+                spent += dt
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+        self._measure(spent / N)
+        return labels

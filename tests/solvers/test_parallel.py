@@ -1,0 +1,177 @@
+"""A branch-and-bound level classified on an executor gives the serial outcome: the same
+boxes in the same order, for the set searches of the library, with a process pool and with
+a Dask cluster; a dying worker loses no box, a failing classifier fails the run."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import warnings
+from concurrent.futures import Executor, ProcessPoolExecutor
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import casadi_cmpc as cm
+from casadi_cmpc.interval import InclusionFunction
+from casadi_cmpc.solvers import _parallel
+from casadi_cmpc.solvers.engine import (
+    INNER,
+    OUTER,
+    UNDECIDED,
+    BoxFrontier,
+    branch_and_bound,
+)
+
+
+class _Counting(Executor):
+    """An executor that counts the tasks it passes on (the levels did go to the pool)."""
+
+    def __init__(self, inner: Executor) -> None:
+        self.inner, self.n = inner, 0
+        self._max_workers = 2
+
+    def submit(self, fn, /, *args, **kwargs):
+        self.n += 1
+        return self.inner.submit(fn, *args, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def process_pool():
+    with ProcessPoolExecutor(2) as ex:
+        yield ex
+
+
+@pytest.fixture()
+def pool(process_pool):
+    ex = _Counting(process_pool)
+    yield ex
+    assert ex.n > 0  # some level of every search was cut into tasks
+
+
+@pytest.fixture(autouse=True)
+def small_tasks(monkeypatch):
+    """Tiny tasks: the small searches of these tests are cut in chunks."""
+    monkeypatch.setattr(_parallel, "TARGET_S", 1e-6)
+    monkeypatch.setattr(_parallel, "MIN_CHUNK", 16)
+
+
+def _same_paving(a, b) -> bool:
+    return all(np.array_equal(getattr(a, k), getattr(b, k))
+               for k in ("inner", "boundary", "outside"))
+
+
+def _three_state() -> tuple[cm.Model, cm.Polytope]:
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u")
+    f = ca.vertcat(x[0] + 0.1 * x[1], x[1] + 0.1 * (u + 0.5 * x[0] * x[0] + 0.2 * x[2]),
+                   0.7 * x[2] + 0.1 * x[0] ** 2 + 0.1 * x[1])
+    m = cm.Model(x=x, u=u, f=f, X=cm.Box([-1] * 3, [1] * 3), U=cm.Box([-2], [2]))
+    return m, cm.Polytope.from_box(cm.Box([-0.4] * 3, [0.4] * 3))
+
+
+def test_one_step_set_on_a_process_pool_equals_the_serial_run(pool):
+    m, T = _three_state()
+    A = cm.one_step_set(m, T, 0.1, progress=False)
+    B = cm.one_step_set(m, T, 0.1, progress=False, executor=pool)
+    assert A.paving.n_inner > 0 and _same_paving(A.paving, B.paving)
+    assert np.array_equal(A.witness, B.witness)  # the proving controls came back in order
+    assert A.n_pairs == B.n_pairs
+
+
+def test_sivia_and_its_component_classifier_on_a_pool(pool):
+    p = ca.SX.sym("p", 2)
+    f = ca.Function("routh", [p], [ca.vertcat(p[0] + p[1] + 2, (p[0] - 1) ** 2
+                                              + (p[1] - 1) ** 2 - 1,
+                                              2 * (p[0] + 3) * (p[1] + 3) - 15)])
+    X0, Y = cm.Box([-3, -3], [9, 9]), cm.Box([0, 0, 0], [np.inf] * 3)
+    A = cm.sivia(f, X0, Y, eps=0.02, open_target=True, progress=False)
+    B = cm.sivia(f, X0, Y, eps=0.02, open_target=True, progress=False, executor=pool)
+    assert A.paving.n_inner > 100 and _same_paving(A.paving, B.paving)
+    with pytest.raises(ValueError, match="contract"):
+        cm.sivia(f, X0, Y, eps=0.1, contract=True, executor=pool)
+
+
+def test_certify_invariant_on_a_pool_gives_the_serial_certificate(pool):
+    ex = cm.models.load("cannon")
+    S = ex.terminal
+    law = ex.local_law
+    a = cm.certify_invariant(ex.model, S, law, 0.02, progress=False)
+    b = cm.certify_invariant(ex.model, S, law, 0.02, progress=False, executor=pool)
+    assert a.label == b.label and a.proved == b.proved
+    for k in ("state set", "input bound"):
+        if k in a.details:
+            assert a.details[k]["inner"] == b.details[k]["inner"]
+            assert a.details[k]["boundary"] == b.details[k]["boundary"]
+
+
+class _Halves:
+    """Labels boxes by their lower bound; exits its process when run in a worker the first
+    time (a crashed worker)."""
+
+    def __init__(self, die: bool) -> None:
+        self.die = die
+
+    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+        import multiprocessing
+
+        if self.die and multiprocessing.parent_process() is not None:
+            os._exit(3)
+        lab = np.full(len(fr), UNDECIDED, dtype=np.int8)
+        lab[fr.hi[:, 0] < 0.3] = OUTER
+        lab[fr.lo[:, 0] > 0.7] = INNER
+        return lab
+
+
+def test_a_dying_worker_loses_no_box():
+    fr = BoxFrontier.from_boxes(np.array([[[0.0, 1.0], [0.0, 1.0]]]))
+    ref = branch_and_bound(fr, _Halves(False), 0.01, progress=False)
+    with ProcessPoolExecutor(2) as ex, warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        got = branch_and_bound(fr, _Halves(True), 0.01, progress=False, executor=ex)
+    assert any("worker process died" in str(r.message) for r in rec)
+    for k in ("inner", "boundary", "outer"):
+        assert np.array_equal(getattr(ref, k).boxes, getattr(got, k).boxes)
+
+
+def _fails(fr: BoxFrontier) -> np.ndarray:
+    import multiprocessing
+
+    if multiprocessing.parent_process() is not None:  # in a worker
+        raise ValueError("classifier failure")
+    return np.zeros(len(fr), dtype=np.int8)
+
+
+def test_a_failing_classifier_fails_the_run(pool):
+    fr = BoxFrontier.from_boxes(np.array([[[0.0, 1.0], [0.0, 1.0]]]))
+    with pytest.raises(ValueError, match="classifier failure"):
+        branch_and_bound(fr, _fails, 0.01, progress=False, executor=pool)
+    with pytest.raises(TypeError, match="executor"):
+        branch_and_bound(fr, _fails, 0.1, progress=False, executor=object())
+
+
+def test_inclusion_functions_travel_as_their_graph():
+    m = cm.models.load("cstr").model
+    rng = np.random.default_rng(3)
+    c = rng.uniform(m.X.lo, m.X.hi, (50, 2))
+    X = np.stack([c - 0.01, c + 0.01], -1)
+    U, W = np.array([[[-0.1, 0.1]]]), np.zeros((1, 0, 2))
+    for kind in ("natural", "centered"):
+        F = InclusionFunction(m.function, kind)
+        G = pickle.loads(pickle.dumps(F))
+        assert G.kind == kind and np.array_equal(F(X, U, W)[0], G(X, U, W)[0])
+        assert pickle.loads(pickle.dumps(F)) is G  # rebuilt once per process
+
+
+def test_sivia_on_a_dask_cluster_equals_the_serial_run():
+    distributed = pytest.importorskip("distributed")
+    p = ca.SX.sym("p", 2)
+    g = ca.Function("disk", [p], [p[0] ** 2 + p[1] ** 2])
+    A = cm.sivia(g, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.01, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        B = cm.sivia(g, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.01,
+                     progress=False, executor=client.get_executor())
+    assert _same_paving(A.paving, B.paving)
