@@ -446,8 +446,7 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
         ``ProcessPoolExecutor(n)`` on this machine, or ``distributed.Client(address)
         .get_executor()`` on a Dask cluster (workers with casadi_cmpc installed). The result
         is that of the serial run (the same boxes in the same order; see
-        :mod:`casadi_cmpc.solvers._parallel` for the one caveat, libm functions). Not for
-        ``method="modal"``.
+        :mod:`casadi_cmpc.solvers._parallel` for the one caveat, libm functions).
 
     Returns
     -------
@@ -490,11 +489,8 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     D = _domain(model, X)
     obs = _as_obstacles(obstacles, model.n)
     if meth == "modal":
-        if executor is not None:
-            raise ValueError("executor is for the general method (the modal one runs in "
-                             "this process)")
         return _modal(model, target, eps, D, robust, relative, max_boxes, time_limit,
-                      progress, options, obs)
+                      progress, options, obs, executor=executor)
     if options:
         raise ValueError("options are for method='modal'")
     T = _Target(model, target)
@@ -564,7 +560,8 @@ def _modal_rows(model: Model, A: np.ndarray, robust: bool) -> tuple[ca.Function,
 
 def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative: bool,
            max_boxes: int, time_limit: float | None, progress: bool | None,
-           options: dict[str, Any] | None, obstacles: list[Any]) -> OneStepSet:
+           options: dict[str, Any] | None, obstacles: list[Any],
+           executor: Any = None) -> OneStepSet:
     from ..solvers.quantified import quantified_sivia
 
     members = _flatten(target)
@@ -577,7 +574,8 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
     Y = Box(np.full(A.shape[0], -np.inf), b)
     t0 = time.perf_counter()
     pav = quantified_sivia(g, D, model.U, Wb, Y, eps, options=options, relative=relative,
-                           max_boxes=max_boxes, time_limit=time_limit, progress=progress)
+                           max_boxes=max_boxes, time_limit=time_limit, progress=progress,
+                           executor=executor)
     if obstacles:
         # inner boxes that may meet an obstacle are not proven members: undecided; boxes
         # inside an obstacle are outside

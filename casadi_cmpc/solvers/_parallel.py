@@ -3,24 +3,27 @@
 A level's frontier is cut into contiguous chunks; each chunk is classified by a worker
 (a :class:`~concurrent.futures.ProcessPoolExecutor` process, or a Dask worker through
 ``distributed.Client.get_executor()``), and the labels (and the per-element data a classifier
-writes, such as proving controls) are put back in order. Everything else of the search (the
-reduction of grouped labels, bisection, budgets, the record of finished boxes) stays in the
-driver, so the outcome is that of the serial search: the same boxes in the same order,
-provided the classifier labels each element from that element alone (every classifier of the
-library does), and that its interval evaluations give the same bits in the worker as in the
-driver (they do for operations that every backend evaluates the same way: ``+ - *``, squares,
-constants; for libm functions the numpy, scalar and native backends may differ in the last
-bits of a bound, which can change a label at a box within a few ulps of a decision).
+writes, such as proving controls) are put back in order. Everything else of the search stays
+in the driver: the reduction of grouped labels, bisection, budgets, the record of finished
+boxes, and, for a two-phase classifier (``map`` on the workers, ``combine`` in the driver),
+the level-wide reduction such as the incumbent bound of :func:`~casadi_cmpc.minimize`. The
+outcome is that of the serial search, the same boxes in the same order, provided the
+classifier labels each element from that element alone (every classifier of the library
+does) and its interval evaluations give the same bits in the worker as in the driver. They
+do for the operations every backend evaluates alike (``+ - *``, squares, constants); for
+libm functions the numpy, scalar and native backends may differ in the last bits of a bound,
+which can change a label at a box within a few ulps of a decision.
 
 Chunk sizes follow the measured cost: about :data:`TARGET_S` seconds of work per task (a Dask
 task costs about 1 ms of overhead, a process-pool task less), from the cost per element of
 the previous level; levels with less work than two tasks run in the driver.
 
-The classifier is serialised once per level (pickle; closures need ``cloudpickle``, which the
-``[dask]`` extra installs) and rebuilt once per worker process (kept by a hash of its bytes),
-so that its compiled evaluators and their native kernels are reused across chunks and levels.
-A worker process that dies is replaced by classifying its chunk in the driver (with a
-warning); no chunk is lost, and an exception raised by the classifier itself is raised again.
+The classifier is serialised once per level (pickle, CasADi expressions in one shared
+context; closures need ``cloudpickle``, which the ``[dask]`` extra installs) and rebuilt once
+per worker process (kept by a hash of its bytes), so that its compiled evaluators and their
+native kernels are reused across chunks and levels. A worker process that dies is replaced
+by classifying its chunk in the driver (with a warning); no chunk is lost, and an exception
+raised by the classifier itself is raised again.
 """
 
 from __future__ import annotations
@@ -77,11 +80,23 @@ def _classifier(blob: bytes, key: str) -> Any:
     return clf
 
 
-def _classify_chunk(blob: bytes, key: str, chunk: Any) -> tuple[np.ndarray, Any, float]:
-    """Worker side: (labels, the chunk's per-element data, seconds)."""
+def _classify_chunk(blob: bytes, key: str, chunk: Any) -> tuple[Any, Any, float]:
+    """Worker side: (labels, or the :meth:`map` part of a two-phase classifier; the chunk's
+    per-element data; seconds)."""
     t0 = time.perf_counter()
-    labels = np.asarray(_classifier(blob, key)(chunk), dtype=np.int8)
-    return labels, getattr(chunk, "data", None), time.perf_counter() - t0
+    clf = _classifier(blob, key)
+    if _two_phase(clf):
+        out: Any = clf.map(chunk)
+    else:
+        out = np.asarray(clf(chunk), dtype=np.int8)
+    return out, getattr(chunk, "data", None), time.perf_counter() - t0
+
+
+def _two_phase(clf: Any) -> bool:
+    """A classifier whose labels need the whole level (e.g. a bound shared by all boxes):
+    ``map(chunk) -> part`` per chunk on the workers, ``combine(frontier, parts) -> labels``
+    in the driver, with ``combine(fr, [map(fr)])`` the serial classification."""
+    return callable(getattr(clf, "map", None)) and callable(getattr(clf, "combine", None))
 
 
 def _workers(executor: Executor) -> int:
@@ -124,7 +139,11 @@ class LevelRunner:
         if self.executor is None or N < 2 * MIN_CHUNK or (
                 self.cost is not None and N * self.cost < 2 * self.target_s):
             t0 = time.perf_counter()
-            labels = np.asarray(classify(frontier), dtype=np.int8)
+            if _two_phase(classify):
+                labels = classify.combine(frontier, [classify.map(frontier)])
+            else:
+                labels = classify(frontier)
+            labels = np.asarray(labels, dtype=np.int8)
             if N:
                 self._measure((time.perf_counter() - t0) / N)
             return labels
@@ -151,7 +170,9 @@ class LevelRunner:
         chunks = [frontier.take(np.arange(a, b)) for a, b in bounds]
         futures = [self.executor.submit(_classify_chunk, blob, key, c) for c in chunks]
         self.n_tasks += len(futures)
+        two = _two_phase(classify)
         labels = np.empty(N, dtype=np.int8)
+        parts: list[Any] = []
         spent = 0.0
         try:
             for (a, b), chunk, fut in zip(bounds, chunks, futures, strict=True):
@@ -162,10 +183,14 @@ class LevelRunner:
                                   "elements is classified in the driver", CmpcWarning,
                                   stacklevel=4)
                     t0 = time.perf_counter()
-                    lab = np.asarray(classify(chunk), dtype=np.int8)
+                    lab = classify.map(chunk) if two else np.asarray(classify(chunk),
+                                                                     dtype=np.int8)
                     data, dt = getattr(chunk, "data", None), time.perf_counter() - t0
                     self.executor = None  # a broken pool takes no more tasks
-                labels[a:b] = lab
+                if two:
+                    parts.append(lab)
+                else:
+                    labels[a:b] = lab
                 if data:
                     for name, v in data.items():
                         frontier.data[name][a:b] = v
@@ -175,4 +200,6 @@ class LevelRunner:
                 fut.cancel()
             raise
         self._measure(spent / N)
+        if two:
+            labels = np.asarray(classify.combine(frontier, parts), dtype=np.int8)
         return labels

@@ -198,17 +198,44 @@ class _Minimax:
             self.upper = float(ub[k])
             self.u = pts[k].copy()
 
-    def classify(self, fr: BoxFrontier) -> np.ndarray:
+    def map(self, fr: BoxFrontier) -> dict[str, np.ndarray]:
+        """The per-box part of a classification (pure; run on the workers of an executor):
+        lower bounds, proven infeasibility, and the certified value at the midpoint (+inf
+        where it is not proven feasible)."""
         with np.errstate(all="ignore"):
-            ub = fr.boxes
-            lb, infeasible = self.lower_bounds(ub, self.cells)
-            live = ~infeasible
-            if live.any():
-                mid = np.clip(0.5 * fr.lo[live] + 0.5 * fr.hi[live], fr.lo[live], fr.hi[live])
-                self.certify(mid, self.cells)
-            labels = np.full(len(fr), UNDECIDED, dtype=np.int8)
-            labels[infeasible | (lb > self.upper)] = OUTER
-            return labels
+            lb, infeasible = self.lower_bounds(fr.boxes, self.cells)
+            cert = np.full(len(fr), np.inf)
+            live = np.flatnonzero(~infeasible)
+            if live.size:
+                lo, hi = fr.lo[live], fr.hi[live]
+                mid = np.clip(np.clip(0.5 * lo + 0.5 * hi, lo, hi), self.U[:, 0], self.U[:, 1])
+                ub, ok = self.point_bounds(mid, self.cells)
+                cert[live] = np.where(ok, ub, np.inf)
+            return {"lb": lb, "infeasible": infeasible, "cert": cert}
+
+    def combine(self, fr: BoxFrontier, parts: list[dict[str, np.ndarray]]) -> np.ndarray:
+        """Labels of a level from its :meth:`map` parts (in order): the best certified
+        midpoint lowers the bound, then boxes whose lower bound exceeds it are discarded."""
+        r = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]} if len(parts) > 1 \
+            else parts[0]
+        lb, infeasible, cert = r["lb"], r["infeasible"], r["cert"]
+        live = ~infeasible
+        if live.any() and np.isfinite(cert[live]).any():
+            lo, hi = fr.lo[live], fr.hi[live]
+            mid = np.clip(np.clip(0.5 * lo + 0.5 * hi, lo, hi), self.U[:, 0], self.U[:, 1])
+            k = int(np.argmin(cert[live]))
+            if cert[live][k] < self.upper:
+                self.upper = float(cert[live][k])
+                self.u = mid[k].copy()
+        labels = np.full(len(fr), UNDECIDED, dtype=np.int8)
+        labels[infeasible | (lb > self.upper)] = OUTER
+        return labels
+
+    def classify(self, fr: BoxFrontier) -> np.ndarray:
+        """Labels of a level (:meth:`map` then :meth:`combine`)."""
+        return self.combine(fr, [self.map(fr)])
+
+    __call__ = classify
 
     def worst_w(self, u: np.ndarray) -> np.ndarray:
         """A maximiser of f(u, .) over a grid of W (a guess)."""
@@ -226,7 +253,8 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
             constraints: Any = None, *, params: Any = None, points: Any = None,
             method: str = "auto",
             options: dict[str, Any] | None = None, max_boxes: int = 1_000_000,
-            time_limit: float | None = None, progress: bool | None = None) -> MinimaxResult:
+            time_limit: float | None = None, progress: bool | None = None,
+            executor: Any = None) -> MinimaxResult:
     """Certified constrained minimax: ``min_u max_w f(u, w)`` s.t. ``g(u, w) <= 0`` for all w.
 
     Thesis §5.1.6, Alg 5.3, as one interval branch and bound over u (see Notes).
@@ -270,6 +298,11 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
         Limits; a stopped search keeps its bracket certified.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+
+    executor : concurrent.futures.Executor, optional
+        Evaluate the bounds of the large levels on this executor (``ProcessPoolExecutor``,
+        or ``distributed.Client(address).get_executor()``); the incumbent bound is updated
+        once per level in this process, so the result is that of the serial run.
 
     Returns
     -------
@@ -364,8 +397,9 @@ def minimax(f: Any, U: Any, W: Any, eps: float,
         with np.errstate(all="ignore"):
             S.certify(P0, S.cells)
     fr = BoxFrontier.from_boxes(ub0[None])
-    out = branch_and_bound(fr, S.classify, eps, max_boxes=max_boxes, time_limit=time_limit,
-                           keep_outer=False, progress=progress, desc="minimax")
+    out = branch_and_bound(fr, S, eps, max_boxes=max_boxes, time_limit=time_limit,
+                           keep_outer=False, progress=progress, desc="minimax",
+                           executor=executor)
     cand = out.boundary.boxes
     with np.errstate(all="ignore"):
         # final bounds with the finer cells

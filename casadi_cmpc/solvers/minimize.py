@@ -139,11 +139,9 @@ class _Search:
         self._last = None  # (midpoints, midpoint values, flb) of the last level's kept boxes
 
     # ------------------------------------------------------------ point certification
-    def certify_points(self, pts: np.ndarray) -> None:
-        """Certify ``f <= value`` and feasibility at the points; keep the best bound."""
-        if pts.shape[0] == 0:
-            return
-        pts = np.clip(pts, self.lo0, self.hi0)
+    def _point_values(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Upper bounds of f at the points (inside X0), and whether each is proven
+        feasible and finite, (m,) each."""
         pts_thin = thin(pts)
         m = pts.shape[0]
         fu = self.F_point.evaluate_unchecked([pts_thin], m)[0][:, 0, 1]
@@ -151,34 +149,67 @@ class _Search:
         if self.G_point is not None:
             gu = self.G_point.evaluate_unchecked([pts_thin], m)[0][..., 1]
             ok &= (gu <= 0).all(axis=1)
-        if not ok.any():
+        return fu, ok
+
+    def _lower_upper(self, pts: np.ndarray, fcert: np.ndarray) -> None:
+        """Keep the best certified value ``fcert`` (+inf: not certified) of the points."""
+        if pts.shape[0] == 0 or not np.isfinite(fcert).any():
             return
-        k = int(np.argmin(np.where(ok, fu, np.inf)))
-        if fu[k] < self.upper:
-            self.upper = float(fu[k])
+        k = int(np.argmin(fcert))
+        if fcert[k] < self.upper:
+            self.upper = float(fcert[k])
             self.x = pts[k].copy()
+
+    def certify_points(self, pts: np.ndarray) -> None:
+        """Certify ``f <= value`` and feasibility at the points; keep the best bound."""
+        if pts.shape[0] == 0:
+            return
+        pts = np.clip(pts, self.lo0, self.hi0)
+        fu, ok = self._point_values(pts)
+        self._lower_upper(pts, np.where(ok, fu, np.inf))
 
     def _note_guess(self, value: float, x: np.ndarray) -> None:
         if np.isfinite(value) and (self.guess is None or value < self.guess[0]):
             self.guess = (float(value), x.copy())
 
     # --------------------------------------------------------------------- classifier
-    def classify(self, fr: BoxFrontier) -> np.ndarray:
+    def map(self, fr: BoxFrontier) -> dict[str, np.ndarray]:
+        """The per-box part of a classification (a pure function of the boxes, run on the
+        workers of an executor): lower bounds of f, proven infeasibility, and the
+        certified value of f at the midpoint (+inf where the midpoint is not proven
+        feasible)."""
         n_box = len(fr)
         boxes = fr.boxes
-        labels = np.full(n_box, UNDECIDED, dtype=np.int8)
         flb = self.F.evaluate_unchecked([boxes], n_box)[0][:, 0, 0]
         infeasible = np.zeros(n_box, dtype=bool)
         if self.G is not None:
             g = self.G.evaluate_unchecked([boxes], n_box)[0]
             infeasible = (g[..., 0] > 0).any(axis=1)
+        mid = np.clip(0.5 * fr.lo + 0.5 * fr.hi, fr.lo, fr.hi)
+        fmid = np.full(n_box, np.inf)
+        fcert = np.full(n_box, np.inf)
+        live = np.flatnonzero(~infeasible)
+        if live.size:
+            fm, ok = self._point_values(mid[live])
+            fmid[live] = fm
+            fcert[live] = np.where(ok, fm, np.inf)
+        return {"flb": flb, "infeasible": infeasible, "fmid": fmid, "fcert": fcert}
+
+    def combine(self, fr: BoxFrontier, parts: list[dict[str, np.ndarray]]) -> np.ndarray:
+        """Labels of a level from the :meth:`map` parts of its boxes (in order): the best
+        certified midpoint and the vertices of the best boxes lower the upper bound, then
+        boxes whose lower bound exceeds it are discarded."""
+        r = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]} if len(parts) > 1 \
+            else parts[0]
+        flb, infeasible, fmid, fcert = r["flb"], r["infeasible"], r["fmid"], r["fcert"]
+        labels = np.full(len(fr), UNDECIDED, dtype=np.int8)
         live = ~infeasible
         if live.any():
             lo, hi = fr.lo[live], fr.hi[live]
             mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-            fmid = self.F_point.evaluate_unchecked([thin(mid)], mid.shape[0])[0][:, 0, 1]
-            self.certify_points(mid)
-            order = np.argsort(np.where(np.isfinite(fmid), fmid, np.inf), kind="stable")
+            fml = fmid[live]
+            self._lower_upper(mid, fcert[live])
+            order = np.argsort(np.where(np.isfinite(fml), fml, np.inf), kind="stable")
             best = order[:_VERTEX_BOXES]
             if 0 < self.n and 2 ** self.n <= _VERTEX_MAX and best.size:
                 bits = np.array(np.meshgrid(*[[0.0, 1.0]] * self.n, indexing="ij"))
@@ -186,11 +217,22 @@ class _Search:
                 verts = np.where(bits[None] == 1.0, hi[best][:, None, :], lo[best][:, None, :])
                 self.certify_points(verts.reshape(-1, self.n))
             keep = flb[live] <= self.upper
-            self._last = (mid[keep], fmid[keep], flb[live][keep])
+            self._last = (mid[keep], fml[keep], flb[live][keep])
         else:
             self._last = None
         labels[infeasible | (flb > self.upper)] = OUTER
         return labels
+
+    def classify(self, fr: BoxFrontier) -> np.ndarray:
+        """Labels of a level (:meth:`map` then :meth:`combine`)."""
+        return self.combine(fr, [self.map(fr)])
+
+    __call__ = classify
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_nlp"] = None  # the local solver stays in the driver
+        return state
 
     # -------------------------------------------------------------------- local solver
     def on_level(self, level: int, fr: BoxFrontier, labels: np.ndarray) -> None:
@@ -271,7 +313,7 @@ class _Search:
 def minimize(f: Any, X0: Any, eps: float, constraints: Any = None, *,
              kind: str | None = None, local_solver: str | None = "ipopt",
              max_boxes: int = 2_000_000, time_limit: float | None = None,
-             progress: bool | None = None) -> MinimizeResult:
+             progress: bool | None = None, executor: Any = None) -> MinimizeResult:
     """Certified global minimisation over a box, with inequality constraints (thesis Alg 4.2).
 
     Finds ``lower <= min {f(x) : x in X0, g(x) <= 0} <= upper`` by interval branch and
@@ -307,6 +349,11 @@ def minimize(f: Any, X0: Any, eps: float, constraints: Any = None, *,
         Stop after this many seconds (checked once per level; ``status = BUDGET``).
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+
+    executor : concurrent.futures.Executor, optional
+        Evaluate the bounds of the large levels on this executor (``ProcessPoolExecutor``,
+        or ``distributed.Client(address).get_executor()``); the incumbent bound is updated
+        once per level in this process, so the result is that of the serial run.
 
     Returns
     -------
@@ -393,9 +440,10 @@ def minimize(f: Any, X0: Any, eps: float, constraints: Any = None, *,
             g = None
 
     search = _Search(f, g, x0, kind_l, local, F_given, G_given)
-    out = branch_and_bound(BoxFrontier.from_boxes(x0[None]), search.classify, eps,
+    out = branch_and_bound(BoxFrontier.from_boxes(x0[None]), search, eps,
                            max_boxes=int(max_boxes), time_limit=time_limit, keep_outer=False,
-                           progress=progress, desc="minimize", on_level=search.on_level)
+                           progress=progress, desc="minimize", on_level=search.on_level,
+                           executor=executor)
     cand = out.boundary
     boxes = cand.boxes
     upper = search.upper

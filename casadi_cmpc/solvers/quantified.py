@@ -118,7 +118,6 @@ class _QuantifiedClassifier:
         self.imp_xu = np.zeros(self.d, dtype=bool)
         self.imp_xu[: n + m] = True
         self.imp_none = np.zeros(self.d, dtype=bool)
-        self.n_pairs = 0  # (x-box, U-cell) pairs examined in total (statistics)
 
     def fresh_data(self, N: int) -> dict[str, np.ndarray]:
         """Per-pair data of N state boxes whose cell is the whole U."""
@@ -164,7 +163,6 @@ class _QuantifiedClassifier:
         labels = np.zeros(P, dtype=np.int8)
         if P == 0:
             return labels
-        self.n_pairs += P
         data = fr.data
         Z = np.concatenate([fr.boxes, np.broadcast_to(self.W, (P, self.l, 2))], axis=1)
         J = ext.jacobian_unchecked(Z)
@@ -248,7 +246,7 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
                      options: dict[str, Any] | None = None, split_ratio: float = 0.5,
                      relative: bool = False, max_boxes: int = 2_000_000,
                      time_limit: float | None = None, keep_outer: bool = True,
-                     progress: bool | None = None) -> SetResult:
+                     progress: bool | None = None, executor: Any = None) -> SetResult:
     """Quantified set inversion: pave ``{x ∈ X0 : ∀w ∈ W ∃u ∈ U : f(x, u, w) ∈ Y}``.
 
     Thesis §5.1.5, Alg 5.1 (one output) and Alg 5.2 (several outputs, nested bisection of U).
@@ -302,6 +300,11 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
         Keep the excluded boxes (``result.outside``) for drawing.
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+
+    executor : concurrent.futures.Executor, optional
+        Classify the large levels on this executor (``ProcessPoolExecutor``, or
+        ``distributed.Client(address).get_executor()``); the result is that of the serial
+        run.
 
     Returns
     -------
@@ -426,7 +429,8 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
                                  data=classify.fresh_data(1), restart=classify.fresh_data(1),
                                  shared="excl", split_ratio=split_ratio)
     out = branch_and_bound(fr, classify, eps, max_boxes=max_boxes, time_limit=time_limit,
-                           keep_outer=keep_outer, progress=progress, desc="quantified sivia")
+                           keep_outer=keep_outer, progress=progress, desc="quantified sivia",
+                           executor=executor)
     bnd = out.boundary.x_boxes
     if bnd.shape[0]:  # leftovers of a stopped search hold several cells per state box
         bnd = np.unique(bnd, axis=0)
@@ -434,4 +438,4 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
                                  out.n_discarded)
     return SetResult(status=out.status, message=out.message, method=meth, nit=out.levels,
                      n_boxes=out.n_classified, elapsed=out.elapsed, paving=paving,
-                     n_pairs=classify.n_pairs, history=out.history)
+                     n_pairs=out.n_classified, history=out.history)

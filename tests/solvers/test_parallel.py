@@ -175,3 +175,39 @@ def test_sivia_on_a_dask_cluster_equals_the_serial_run():
         B = cm.sivia(g, cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.01,
                      progress=False, executor=client.get_executor())
     assert _same_paving(A.paving, B.paving)
+
+
+def test_minimize_on_a_pool_equals_the_serial_run(pool):
+    """The incumbent bound is a reduction over the whole level: with the bounds evaluated on
+    the workers and the bound lowered in the driver, the result is the serial one."""
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("six_hump", [x], [(4 - 2.1 * x[0] ** 2 + x[0] ** 4 / 3) * x[0] ** 2
+                                      + x[0] * x[1] + (-4 + 4 * x[1] ** 2) * x[1] ** 2])
+    g = ca.Function("disk", [x], [x[0] ** 2 + x[1] ** 2 - 2.5])
+    X0 = cm.Box([-3, -2], [3, 2])
+    a = cm.minimize(f, X0, 1e-4, constraints=g, local_solver=None, progress=False)
+    b = cm.minimize(f, X0, 1e-4, constraints=g, local_solver=None, progress=False,
+                    executor=pool)
+    assert a.lower == b.lower and a.upper == b.upper and np.array_equal(a.x, b.x)
+    assert a.upper - a.lower < 1e-3 and abs(a.upper + 1.0316284534898774) < 1e-3
+    assert a.n_boxes == b.n_boxes
+
+
+def test_minimax_on_a_pool_equals_the_serial_run(pool):
+    u = ca.SX.sym("u", 2)
+    w = ca.SX.sym("w")
+    f = ca.Function("f", [u, w], [(u[0] - 0.3) * w + 0.5 * u[0] + (u[1] - w) ** 2])
+    g = ca.Function("g", [u, w], [u[0] + u[1] * w - 1.2])
+    U, W = cm.Box([-1, -1], [1, 1]), cm.Box([-1], [1])
+    a = cm.minimax(f, U, W, 1e-3, constraints=g, progress=False)
+    b = cm.minimax(f, U, W, 1e-3, constraints=g, progress=False, executor=pool)
+    assert a.lower == b.lower and a.upper == b.upper and np.array_equal(a.u, b.u)
+    assert np.array_equal(a.candidates, b.candidates) and a.width < 1e-2
+
+
+def test_quantified_sivia_through_the_modal_one_step_set_on_a_pool(pool):
+    ex = cm.models.load("cannon")
+    a = cm.one_step_set(ex.model, ex.terminal, 0.1, method="modal", progress=False)
+    b = cm.one_step_set(ex.model, ex.terminal, 0.1, method="modal", progress=False,
+                        executor=pool)
+    assert a.paving.n_inner > 0 and _same_paving(a.paving, b.paving)
