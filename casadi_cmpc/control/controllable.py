@@ -501,12 +501,28 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
                 progress=progress, desc="one-step set", executor=executor)
     pav = Paving(inner=r["inner"], boundary=r["boundary"], outside=r["outer"], domain=D,
                  n_discarded=r["n_discarded"])
-    msg = (f"{pav.n_inner} state boxes proven ({r['semantics']}), {pav.n_boundary} "
-           f"undecided; {r['message']}")
-    return OneStepSet(status=r["status"], message=msg, method="general (Alg 4.6/6.1)",
+    status, msg = _what_was_proven(r["status"], r["message"], pav, r["semantics"])
+    return OneStepSet(status=status, message=msg, method="general (Alg 4.6/6.1)",
                       nit=r["levels"], n_boxes=r["n_classified"], elapsed=r["elapsed"],
                       paving=pav, witness=r["witness"], semantics=r["semantics"],
                       target=target, n_pairs=r["n_pairs"])
+
+
+def _what_was_proven(status: Status, message: str, pav: Paving, semantics: str
+                     ) -> tuple[Status, str]:
+    """The status and message of a one-step set, read from what its paving proves: a
+    completed search with no inner box is not PROVED (UNDECIDED while boxes are undecided,
+    DISPROVED when every box is proven outside: no state of X can reach the target)."""
+    msg = (f"{pav.n_inner} state boxes proven ({semantics}), {pav.n_boundary} undecided; "
+           f"{message}")
+    if status == Status.PROVED and pav.n_inner == 0:
+        if pav.n_boundary:
+            return Status.UNDECIDED, (f"no state box proven ({pav.n_boundary} undecided): "
+                                      "try a smaller eps, more control cells (u_eps, "
+                                      "max_cells) or relative=True; " + message)
+        return Status.DISPROVED, (f"every state box is proven outside ({semantics}): no "
+                                  "state of X reaches the target; " + message)
+    return status, msg
 
 
 def _modal_rows(model: Model, A: np.ndarray, robust: bool) -> tuple[ca.Function, Box | None]:
@@ -592,9 +608,8 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
                      n_discarded=pav.n_discarded + int(buried.sum()))
         pav.status, pav.message, pav.levels, pav.n_classified, pav.n_pairs = (
             status, message, levels, ncl, npairs)
-    msg = (f"{pav.n_inner} state boxes proven ({sem}), {pav.n_boundary} undecided; "
-           f"{pav.message}")
-    return OneStepSet(status=pav.status, message=msg, method="modal (Alg 5.2)",
+    status, msg = _what_was_proven(pav.status, pav.message, pav, sem)
+    return OneStepSet(status=status, message=msg, method="modal (Alg 5.2)",
                       nit=pav.levels, n_boxes=pav.n_classified,
                       elapsed=time.perf_counter() - t0, paving=pav, witness=None,
                       semantics=sem, target=target, n_pairs=pav.n_pairs)

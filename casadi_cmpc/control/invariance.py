@@ -632,7 +632,8 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
                                relative_eps: bool = True, max_iter: int = 100_000,
                                time_limit: float | None = None, max_boxes: int = 200_000,
                                samples: int = 64, seed: int = 0,
-                               progress: bool | None = None) -> InvariantZonotopeResult:
+                               progress: bool | None = None,
+                               executor: Any = None) -> InvariantZonotopeResult:
     r"""The largest zonotope proven invariant under ``u = law(x)`` (thesis Alg 4.4, GOF SIVZG).
 
     Candidates are the zonotope inclusions ``Z_k = center ⊕ ◇(M_k B^m)`` (Thm 4.3:
@@ -675,6 +676,10 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
         Random points tried as counterexamples (see :func:`certify_invariant`).
     progress : bool or None
         tqdm progress bar (None: only for searches longer than 2 s).
+
+    executor : concurrent.futures.Executor, optional
+        Run the large levels of each candidate's certification on this executor
+        (:func:`certify_invariant`); the result is that of the serial run.
 
     Returns
     -------
@@ -764,7 +769,7 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
                 left = None if time_limit is None else max(time_limit - elapsed, 1e-3)
                 t1 = time.perf_counter()
                 cert = _certify(model, closed, Z, eps, W, max_boxes, left, samples, seed,
-                                False, law=law)
+                                False, law=law, executor=executor)
                 st["certify_seconds"] += time.perf_counter() - t1
                 st["tested"] += 1
                 if cert.proved is True:

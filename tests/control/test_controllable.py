@@ -682,3 +682,21 @@ def test_e14_one_step_set_is_sound():
     assert res.semantics == "exists u (no disturbance)"
     check_one_step_sound(ex.model, res, ex.terminal, "robust", np.random.default_rng(4),
                          k_inner=1000, k_outer=500, n_lp=50)
+
+
+def test_a_search_that_proves_nothing_is_not_proved():
+    """The status reads what was proven: a completed search with no inner box is UNDECIDED
+    (boxes left undecided) or DISPROVED (every box outside), never PROVED."""
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    m = cm.Model(x=x, u=u, f=ca.vertcat(x[0] + 0.5 * x[1], x[1] + 0.1 * u),
+                 X=cm.Box([-1, -1], [1, 1]), U=cm.Box([-0.1], [0.1]))
+    far = cm.Polytope.from_box(cm.Box([5, 5], [6, 6]))  # out of reach from every state
+    r = cm.one_step_set(m, far, 0.25, progress=False)
+    assert r.paving.n_inner == 0 and r.status == cm.Status.DISPROVED and not r.success
+    coarse = cm.one_step_set(m, cm.Polytope.from_box(cm.Box([-0.05, -0.05], [0.05, 0.05])),
+                             0.5, progress=False, u_eps=0.5, max_cells=1)
+    assert coarse.paving.n_inner == 0 and coarse.status == cm.Status.UNDECIDED
+    assert "no state box proven" in coarse.message and coarse.volume() == 0.0
