@@ -10,7 +10,8 @@ configured in ``example.info["mpc"]``. It simulates the closed loop from the the
 states, checks the constraints itself, and prints a summary. With ``--out DIR`` it writes the
 figures (PNG), ``summary.json`` and ``report.txt``.
 
-``cmpc list`` prints the examples (name, thesis example, dimensions, what the system is).
+``cmpc list`` prints the examples (name, thesis example or "extra" for the examples not from
+the thesis, dimensions, what the system is).
 ``cmpc cache`` prints the directory of cached set sequences with its files and their sizes;
 ``cmpc cache --clear`` deletes them. ``cmpc export EXAMPLE --out DIR [--build]`` writes the
 controller as C (with ``--build``, make and a C compiler are checked first).
@@ -88,17 +89,14 @@ def _law_key(ex: Any) -> str:
 
 def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     """A file name that changes with the model, T, the law and the settings."""
-    import hashlib
-
     from . import __version__
+    from .control._checkpoint import digest
 
-    h = hashlib.sha256()
-    for part in (ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
-                 np.asarray(ex.terminal.b).tobytes(), _law_key(ex),
-                 repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
-                 __version__, _SEQUENCE_FORMAT):
-        h.update(part if isinstance(part, bytes) else str(part).encode())
-    return _cache_dir(cache) / f"{ex.name}-{h.hexdigest()[:16]}.npz"
+    h = digest((ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
+                np.asarray(ex.terminal.b).tobytes(), _law_key(ex),
+                repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
+                __version__, _SEQUENCE_FORMAT))
+    return _cache_dir(cache) / f"{ex.name}-{h[:16]}.npz"
 
 
 def _size(nbytes: int) -> str:
@@ -135,21 +133,16 @@ def _cache_mismatch(seq: Any, ex: Any, cfg: dict) -> str | None:
 def _save_atomically(seq: Any, path: Path) -> None:
     """Write ``seq`` to ``path`` through a partial file renamed when complete (an
     interrupted write leaves no truncated cache file under the final name)."""
-    import os
+    from .control._checkpoint import save_atomically
 
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.partial.npz")
-    try:
-        seq.save(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    save_atomically(seq, path)
 
 
 def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
-                         solver: str | None = None) -> Any:
+                         solver: str | None = None, checkpoint: str | None = None) -> Any:
     """The SetSequenceMPC of an example and its sequence, from the cache or computed (and
-    then cached); ``solver`` overrides the example's (default ipopt)."""
+    then cached); ``solver`` overrides the example's (default ipopt); ``checkpoint``: the
+    file that makes the computation resumable (see :func:`controllable_sets`)."""
     from .control.controllable import controllable_sets
     from .control.linear_sets import SetSequence
     from .mpc.sequence import SetSequenceMPC
@@ -174,8 +167,14 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
     if seq is None:
         t0 = time.perf_counter()
         seq = controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=cfg["robust"],
-                                law=ex.local_law, progress=progress)
+                                law=ex.local_law, progress=progress, checkpoint=checkpoint)
+        if checkpoint is not None:
+            print(f"checkpoint {checkpoint}: {seq.info.get('resumed_steps', 0)} of the "
+                  f"{len(seq.steps)} steps read from it")
         if seq.status == "interrupted":  # a partial sequence is neither used nor cached
+            if checkpoint is not None:
+                print(f"the completed steps are kept in {checkpoint}: run again with "
+                      f"--checkpoint {checkpoint} to resume", file=sys.stderr)
             raise KeyboardInterrupt
         print(f"sequence computed in {time.perf_counter() - t0:.1f} s ({seq.status})")
         if seq.status in _COMPLETE:
@@ -197,7 +196,8 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
 
 
 def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
-                progress: bool | None = None) -> tuple[Any, Any]:
+                progress: bool | None = None,
+                checkpoint: str | None = None) -> tuple[Any, Any]:
     """The controller of an example and its set sequence (None for the contractive MPC)."""
     from .mpc.contractive import ContractiveMPC
 
@@ -205,7 +205,7 @@ def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
         raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
                          "--controller contractive")
     if kind in ("auto", "sequence") and "sequence" in ex.info:
-        return _sequence_controller(ex, cache, progress)
+        return _sequence_controller(ex, cache, progress, checkpoint=checkpoint)
     return ContractiveMPC(ex.model, **ex.info["mpc"]), None
 
 
@@ -289,7 +289,8 @@ def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
 
 
 def _run(name: str, out: str | None, steps: int | None, seed: int,
-         progress: bool | None, controller: str = "auto", cache: str | None = None) -> int:
+         progress: bool | None, controller: str = "auto", cache: str | None = None,
+         checkpoint: str | None = None) -> int:
     from . import models
     from .mpc.simulate import _summary_lines, simulate
 
@@ -312,7 +313,7 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
     print(model.summary())
     t_build = time.perf_counter()
     try:
-        ctrl, seq = _controller(ex, controller, cache, progress)
+        ctrl, seq = _controller(ex, controller, cache, progress, checkpoint)
     except ValueError as exc:
         print(f"cmpc: {exc}", file=sys.stderr)
         return 2
@@ -666,6 +667,11 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--cache", default=None,
                        help="directory of cached set sequences (default: "
                             "$XDG_CACHE_HOME/casadi_cmpc or ~/.cache/casadi_cmpc)")
+    p_run.add_argument("--checkpoint", default=None, metavar="PATH",
+                       help="file (.npz) that makes computing the sets resumable: written "
+                            "after each completed step; an interrupted or killed run given "
+                            "the same PATH again resumes there (the cache, when it holds "
+                            "the sets, still answers first)")
     p_exp = sub.add_parser("export", help="export the controller of an example to C")
     p_exp.add_argument("example", help="example name; see 'cmpc list'")
     p_exp.add_argument("--out", required=True, help="directory of the C sources (created)")
@@ -710,7 +716,8 @@ def _command(parser: Any, args: Any) -> int:
     if args.steps is not None and args.steps < 1:
         parser.error("--steps must be at least 1")
     return _run(args.example, args.out, args.steps, args.seed,
-                False if args.no_progress else None, args.controller, args.cache)
+                False if args.no_progress else None, args.controller, args.cache,
+                args.checkpoint)
 
 
 if __name__ == "__main__":  # pragma: no cover

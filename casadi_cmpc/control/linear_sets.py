@@ -617,7 +617,7 @@ class SetSequence:
         return ax
 
     # -------------------------------------------------------------- persistence
-    def save(self, path: Any) -> Any:
+    def save(self, path: Any, *, compress: bool = True) -> Any:
         """Save the sequence exactly (sets, steps, status, info) to ``.npz`` or ``.json``.
 
         Parameters
@@ -625,6 +625,10 @@ class SetSequence:
         path : str or Path
             The file written; it must end in ``.npz`` (compressed binary) or ``.json``
             (text).
+        compress : bool
+            Compress the arrays of an ``.npz`` file (default). ``False`` writes the same
+            archive with its arrays stored as they are: larger, several times faster to
+            write (checkpoints rewritten after every step use it).
 
         Returns
         -------
@@ -645,8 +649,9 @@ class SetSequence:
 
         from ..sets.base import _FORMAT_VERSION, _check_suffix, _encode, _save_state
 
+        cum = _StepBoxes(self.steps)
         state = {
-            "sets": [self._set_state(i, S) for i, S in enumerate(self.sets)],
+            "sets": [self._set_state(i, S, cum) for i, S in enumerate(self.sets)],
             "converged_at": -1 if self.converged_at is None else int(self.converged_at),
             "status": self.status,
             "steps": [{k: ({"type": v._type_name, "state": v._state()}
@@ -665,31 +670,30 @@ class SetSequence:
         path.parent.mkdir(parents=True, exist_ok=True)
         # through a file object: numpy would append '.npz' to a name without it
         with open(path, "wb") as fh:
-            np.savez_compressed(fh, __meta__=np.array(json.dumps(meta)),
-                                **{f"a_{k}": v for k, v in arrays.items()})
+            (np.savez_compressed if compress else np.savez)(
+                fh, __meta__=np.array(json.dumps(meta)),
+                **{f"a_{k}": v for k, v in arrays.items()})
         return path
 
-    def _set_state(self, i: int, S: Any) -> dict[str, Any]:
+    def _set_state(self, i: int, S: Any, cum: _StepBoxes | None = None) -> dict[str, Any]:
         """The stored form of ``K_i``: a reference to T and the boxes of steps 1..i when
-        ``K_i`` is exactly their union, else the set's own state."""
+        ``K_i`` is exactly their union (bit for bit), else the set's own state. ``cum``:
+        the step boxes of this sequence, shared by the sets of one :meth:`save`."""
         from ..sets.paving import Paving
         from ..sets.union import SetUnion
 
-        plain = {"type": S._type_name, "state": S._state()}
+        def plain() -> dict[str, Any]:
+            return {"type": S._type_name, "state": S._state()}
+
         if i == 0 or i > len(self.steps) or not isinstance(S, SetUnion) \
                 or len(S.members) != 2:
-            return plain
+            return plain()
         T, P = S.members
         if not isinstance(P, Paving) or P.boundary.shape[0] or P.outside.shape[0] \
                 or not (T is self.sets[0] or _same_state(T, self.sets[0])):
-            return plain
-        boxes = [st.get("boxes") for st in self.steps[:i]]
-        if any(not isinstance(b, np.ndarray) for b in boxes):
-            return plain
-        cum = np.concatenate([np.asarray(b, dtype=float).reshape(-1, P.dim, 2)
-                              for b in boxes])
-        if cum.shape != P.inner.shape or cum.tobytes() != P.inner.tobytes():
-            return plain
+            return plain()
+        if not (cum or _StepBoxes(self.steps)).is_prefix(i, P.inner, P.dim):
+            return plain()
         return {"type": _STEPS_UNION, "state": {
             "dim": P.dim, "n_discarded": P.n_discarded,
             "domain": None if P.domain is None else P.domain.as_array()}}
@@ -759,6 +763,43 @@ class SetSequence:
 
 # the stored form of a K_i that is T plus the boxes of steps 1..i (see SetSequence.save)
 _STEPS_UNION = "SetSequence.steps_union"
+
+
+class _StepBoxes:
+    """The boxes of a sequence's steps 1, 2, ... joined once (per dimension), to test which
+    sets ``K_i`` are exactly the boxes of steps 1..i without joining them again for every
+    i."""
+
+    def __init__(self, steps: list) -> None:
+        self.steps = steps
+        self._by_dim: dict[int, tuple[np.ndarray, list[int]]] = {}
+
+    def _joined(self, dim: int) -> tuple[np.ndarray, list[int]]:
+        """The boxes (N, dim, 2) of the steps up to the first without a box array, and the
+        number of boxes after each of those steps."""
+        if dim not in self._by_dim:
+            parts = []
+            for st in self.steps:
+                b = st.get("boxes")
+                if not isinstance(b, np.ndarray):
+                    break
+                parts.append(np.asarray(b, dtype=float).reshape(-1, dim, 2))
+            ends = list(np.cumsum([p.shape[0] for p in parts], dtype=int))
+            joined = np.concatenate(parts) if parts else np.zeros((0, dim, 2))
+            self._by_dim[dim] = (np.ascontiguousarray(joined), ends)
+        return self._by_dim[dim]
+
+    def is_prefix(self, i: int, inner: np.ndarray, dim: int) -> bool:
+        """Whether ``inner`` is, bit for bit, the boxes of steps 1..i (in order)."""
+        joined, ends = self._joined(dim)
+        if i > len(ends):
+            return False
+        head = joined[:ends[i - 1]]
+        inner = np.asarray(inner)
+        if inner.dtype != head.dtype or inner.shape != head.shape:
+            return False
+        a = np.ascontiguousarray(inner).view(np.uint64)
+        return bool(np.array_equal(a, head.view(np.uint64)))
 
 
 def _same_state(S1: Any, S2: Any) -> bool:
