@@ -262,23 +262,23 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     unknowns are scaled (u = mid(U) + half(U) v, costs divided by their start value). The
     Python controller does the same, so both take the same iterations.
     """
-    from ..mpc.contractive import ContractiveMPC
-    from ..mpc.sequence import SetSequenceMPC
-
     solver = str(solver).lower()
     if solver not in ("sqp", "ipopt"):
         raise ValueError(f"solver must be 'sqp' or 'ipopt'; got {solver!r}")
     steps = int(steps)
     if steps < 1:
         raise ValueError(f"steps must be >= 1; got {steps}")
-    if isinstance(ctrl, SetSequenceMPC):
-        builder: Any = _SequenceExport(ctrl, solver)
-    elif isinstance(ctrl, ContractiveMPC):
-        builder = _ContractiveExport(ctrl, solver)
+    spec_of = getattr(ctrl, "export_spec", None)
+    spec = spec_of() if callable(spec_of) else None
+    kind = getattr(spec, "kind", None)
+    if kind == "set_sequence":
+        builder: Any = _SequenceExport(spec, solver)
+    elif kind == "contractive":
+        builder = _ContractiveExport(spec, solver)
     else:
         raise TypeError(f"export_c exports a SetSequenceMPC or a ContractiveMPC; got "
                         f"{type(ctrl).__name__}")
-    model = ctrl.model
+    model = spec.model
     if x0 is None:
         x0 = builder.default_x0()
     x0 = np.asarray(x0, dtype=float).reshape(-1)
@@ -325,23 +325,23 @@ def _interval_c(funs: list[tuple[ca.Function, str]], what: str) -> str:
 
 
 class _SequenceExport:
-    """Tables and logic of a :class:`~casadi_cmpc.SetSequenceMPC`."""
+    """Tables and logic of a :class:`~casadi_cmpc.SetSequenceMPC` (from its
+    :class:`~casadi_cmpc.mpc.spec.SetSequenceSpec`)."""
 
     kind = "set_sequence"
 
-    def __init__(self, ctrl: Any, solver: str) -> None:
-        from ..mpc.sequence import _members
+    def __init__(self, spec: Any, solver: str) -> None:
         from ..sets.box import Box
         from ..sets.polytope import Polytope
 
-        self.ctrl, self.solver = ctrl, solver
-        model = ctrl.model
-        seq = ctrl.seq
-        if getattr(ctrl, "minimax", "vertices") == "interval":
+        self.spec, self.solver = spec, solver
+        model = spec.model
+        seq = spec.seq
+        if spec.minimax == "interval":
             raise ExportError("the interval minimax (Alg 5.3) of this controller has no C "
                               "form; build the controller with minimax='vertices' to export "
                               "it (feasibility is certified either way)")
-        if ctrl.robust and not model.is_affine_in_w:
+        if spec.robust and not model.is_affine_in_w:
             raise ExportError(
                 f"model '{model.name}' is not affine in w: the C successor check evaluates "
                 "the model at the vertices of W, which bound the image f(x, u, W) only for "
@@ -350,7 +350,7 @@ class _SequenceExport:
         if len(seq.sets) < 2:
             raise ExportError("the sequence holds only the terminal set: compute the sets "
                               "first (cm.controllable_sets)")
-        if ctrl._law is None:
+        if spec.local_law is None:
             raise ExportError("the controller has no local law for the terminal set")
         self.model_fun = _model_fun(model)
         self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv")],
@@ -362,8 +362,8 @@ class _SequenceExport:
             raise ExportError(f"the terminal set must be a Polytope or a Box to export; got "
                               f"{type(T0).__name__}")
         self.T = T0
-        self.polytopic = bool(ctrl._polytopic)
-        grid = seq._grid()
+        self.polytopic = bool(spec.polytopic)
+        grid = spec.grid
         if grid is None:
             raise ExportError("the sequence stores no proving boxes and controls (steps); "
                               "sequences from cm.controllable_sets do")
@@ -374,8 +374,8 @@ class _SequenceExport:
         self.polys: list[tuple[np.ndarray, np.ndarray, int]] = []
         if self.polytopic:
             seen: dict[bytes, int] = {}
-            for j, S in enumerate(seq.sets):
-                for M in _members(S):
+            for j, members in enumerate(spec.members):
+                for M in members:
                     if not isinstance(M, Polytope):
                         continue
                     A, b = np.asarray(M.A, dtype=float), np.asarray(M.b, dtype=float)
@@ -383,18 +383,15 @@ class _SequenceExport:
                     if key not in seen:
                         seen[key] = len(self.polys)
                         self.polys.append((A, b, j))
-        # NLP parameters per target level j (exactly those of SetSequenceMPC._solve_nlp)
+        # NLP parameters per target level j (exactly those of the Python controller)
         L = len(seq.sets)
-        r = ctrl._rmax
+        r = spec.rows
         self.r = r
         self.nlp_H = np.zeros((max(L - 1, 1), r * model.n))
         self.nlp_h = np.ones((max(L - 1, 1), r))
-        if r:
-            for j in range(L - 1):
-                rows = ctrl._rows(j, r)
-                H, h = rows if rows is not None else (np.zeros((r, model.n)), np.ones(r))
-                self.nlp_H[j] = H.ravel(order="F")
-                self.nlp_h[j] = h
+        for j, (H, h) in enumerate(spec.nlp_rows):
+            self.nlp_H[j] = H.ravel(order="F")
+            self.nlp_h[j] = h
         edges, lev, box = grid
         offs = np.cumsum([0] + [st["boxes"].shape[0] for st in seq.steps])
         # global witness row per cell (level i box k -> offs[i-1] + k)
@@ -412,32 +409,31 @@ class _SequenceExport:
                       "polytope_rows": int(sum(p[0].shape[0] for p in self.polys))}
 
     def default_x0(self) -> np.ndarray:
-        B = self.ctrl.seq.steps[-1]["boxes"]
+        B = self.spec.seq.steps[-1]["boxes"]
         if B.shape[0]:
             c = 0.5 * (B[..., 0] + B[..., 1])
             return c[np.argmax(np.abs(c).sum(axis=1))]
-        return self.ctrl.model.X.mid
+        return self.spec.model.X.mid
 
     def functions(self) -> list[ca.Function]:
-        ctrl, model = self.ctrl, self.ctrl.model
-        nlp, plugin, opts = ctrl._nlp_spec
-        py_solver = "sqp" if plugin == "sqpmethod" else "ipopt"
-        S = _solver_for_export(nlp, "cmpc_solver", self.solver, py_solver, opts)
+        spec, model = self.spec, self.spec.model
+        py_solver = "sqp" if spec.plugin == "sqpmethod" else "ipopt"
+        S = _solver_for_export(spec.nlp, "cmpc_solver", self.solver, py_solver, spec.options)
         x = ca.SX.sym("x", model.n)
         u = ca.SX.sym("u", model.m)
-        u0, c = ctrl._start(x, u)
+        u0, c = spec.start(x, u)
         start = ca.Function("cmpc_start", [x, u], [u0, c], ["x", "u_guess"], ["u0", "costs"])
-        law = ca.Function("cmpc_law", [x], [ctrl._law(x)], ["x"], ["u"])
+        law = ca.Function("cmpc_law", [x], [spec.local_law(x)], ["x"], ["u"])
         return [S, self.model_fun, law, start]
 
     def tables(self) -> str:
-        ctrl, model = self.ctrl, self.ctrl.model
+        spec, model = self.spec, self.spec.model
         n = model.n
         out = ["/* Set tables of the exported controller (generated; do not edit). */",
                "#ifndef CMPC_TABLES_H", "#define CMPC_TABLES_H", ""]
-        out.append(f"#define CMPC_NLEVELS {len(ctrl.seq.sets)}")
+        out.append(f"#define CMPC_NLEVELS {len(spec.seq.sets)}")
         out.append(f"#define CMPC_T_ROWS {self.T.A.shape[0]}")
-        V = ctrl._w_vertices
+        V = spec.w_vertices
         out.append(f"#define CMPC_NV {V.shape[0]}")
         out.append(f"#define CMPC_R {self.r}")
         out.append(f"#define CMPC_POLYTOPIC {1 if self.polytopic else 0}")
@@ -450,11 +446,11 @@ class _SequenceExport:
         out.append(_c_array("double", "cmpc_wv", V))
         out.append(_c_array("double", "cmpc_u_lo", model.U.lo))
         out.append(_c_array("double", "cmpc_u_hi", model.U.hi))
-        out.append(_c_array("double", "cmpc_u_mid", ctrl._u_mid))
+        out.append(_c_array("double", "cmpc_u_mid", spec.u_mid))
         # the solver's scaled control v: u = mid + half v, v in [v_lo, v_hi]
-        out.append(_c_array("double", "cmpc_u_half", ctrl._u_half))
-        out.append(_c_array("double", "cmpc_v_lo", ctrl._v_lo))
-        out.append(_c_array("double", "cmpc_v_hi", ctrl._v_hi))
+        out.append(_c_array("double", "cmpc_u_half", spec.u_half))
+        out.append(_c_array("double", "cmpc_v_lo", spec.v_lo))
+        out.append(_c_array("double", "cmpc_v_hi", spec.v_hi))
         # NLP parameters (H column-major, h) per target level j = 0..L-2
         out.append(_c_array("double", "cmpc_nlp_H", self.nlp_H))
         out.append(_c_array("double", "cmpc_nlp_h", self.nlp_h))
@@ -484,39 +480,40 @@ class _SequenceExport:
         return "\n".join(out)
 
     def header(self) -> str:
-        return T.header(self.ctrl.model, self.kind, self.solver, self.sizes)
+        return T.header(self.spec.model, self.kind, self.solver, self.sizes)
 
     def source(self) -> str:
         return T.sequence_source(self.intervals)
 
 
 class _ContractiveExport:
-    """Logic of a :class:`~casadi_cmpc.ContractiveMPC` at a fixed horizon."""
+    """Logic of a :class:`~casadi_cmpc.ContractiveMPC` at a fixed horizon (from its
+    :class:`~casadi_cmpc.mpc.spec.ContractiveSpec`)."""
 
     kind = "contractive"
 
-    def __init__(self, ctrl: Any, solver: str) -> None:
+    def __init__(self, spec: Any, solver: str) -> None:
         from ..sets.box import Box
         from ..sets.polytope import Polytope
 
-        self.ctrl, self.solver = ctrl, solver
-        if ctrl.solver == "lp":
+        self.spec, self.solver = spec, solver
+        if spec.solver == "lp":
             raise ExportError("the LP form (solver='lp') has no C export; build the "
                               "controller with solver='sqp'")
-        if ctrl.horizon is None:
+        if spec.horizon is None:
             raise ExportError("export needs a fixed horizon: build the ContractiveMPC with "
                               "horizon=N (the horizon search runs set inversions)")
-        if ctrl.gauge is not None:
+        if spec.gauge is not None:
             raise ExportError("a polytope gauge contraction is an LP form (solver='lp'), "
                               "which has no C export")
-        if ctrl.mode != "receding":
+        if spec.mode != "receding":
             raise ExportError(
                 "export supports mode='receding' only: the C controller solves at every "
                 "step and applies the first move (see ContractiveMPC.guarantee for what that "
                 "promises); build the controller with mode='receding' to export it")
-        self.N = ctrl.horizon
-        self.h = ctrl._get(self.N)
-        S = ctrl.local_set if ctrl._law is not None else None
+        self.N = spec.horizon
+        self.h = spec.problem
+        S = spec.local_set if spec.local_law is not None else None
         if isinstance(S, Box):
             S = Polytope.from_box(S)
         if S is not None and not isinstance(S, Polytope):
@@ -527,33 +524,30 @@ class _ContractiveExport:
                       "constraints": int(self.h.lbg.size)}
         # the check of a sequence: the interval evaluation of the exact check graph, the
         # one the Python controller certifies with (constants as intervals param_lo/hi)
-        self.model_fun = _model_fun(ctrl.model)
+        self.model_fun = _model_fun(spec.model)
         self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv"),
                                       (self.h.check_fun, "cmpc_check_iv")],
                                      "the C check of a predicted sequence")
 
     def default_x0(self) -> np.ndarray:
-        return self.ctrl.model.X.mid
+        return self.spec.model.X.mid
 
     def functions(self) -> list[ca.Function]:
-        from ..mpc.contractive import _graph, _solver_options
-
-        ctrl, h, model = self.ctrl, self.h, self.ctrl.model
-        plugin, opts = _solver_options(ctrl.solver, ctrl.solver_options)
-        py_solver = "sqp" if plugin == "sqpmethod" else "ipopt"
-        S = _solver_for_export(h.nlp, "cmpc_solver", self.solver, py_solver, opts)
+        spec, h, model = self.spec, self.h, self.spec.model
+        py_solver = "sqp" if h.plugin == "sqpmethod" else "ipopt"
+        S = _solver_for_export(h.nlp, "cmpc_solver", self.solver, py_solver, h.options)
         funs = [S, self.model_fun]
         # the states predicted from the warm-started sequence (multiple shooting's start)
-        fl = _graph(ctrl, self.N, exact=False)
-        funs.append(ca.Function("cmpc_pred", [fl["us"], fl["x0"]],
-                                [ca.vec(ca.horzcat(*fl["xs"][1:]))], ["u", "x0"], ["x"]))
-        if ctrl._law is not None:
+        pred = h.predict_states
+        us, x0 = ca.SX.sym("u", pred.numel_in(0)), ca.SX.sym("x0", pred.numel_in(1))
+        funs.append(ca.Function("cmpc_pred", [us, x0], [pred(us, x0)], ["u", "x0"], ["x"]))
+        if spec.local_law is not None:
             x = ca.SX.sym("x", model.n)
-            funs.append(ca.Function("cmpc_law", [x], [ctrl._law(x)], ["x"], ["u"]))
+            funs.append(ca.Function("cmpc_law", [x], [spec.local_law(x)], ["x"], ["u"]))
         return funs
 
     def tables(self) -> str:
-        ctrl, h, model = self.ctrl, self.h, self.ctrl.model
+        spec, h, model = self.spec, self.h, self.spec.model
         out = ["/* Tables of the exported contractive MPC (generated; do not edit). */",
                "#ifndef CMPC_TABLES_H", "#define CMPC_TABLES_H", ""]
         out.append(f"#define CMPC_N {self.N}")
@@ -565,18 +559,18 @@ class _ContractiveExport:
         out.append(f"#define CMPC_NCHECK_IN {h.check_fun.nnz_in(0)}")
         out.append(f"#define CMPC_HAS_LAW {0 if self.S is None else 1}")
         out.append(f"#define CMPC_S_ROWS {0 if self.S is None else self.S.A.shape[0]}")
-        out.append(f"#define CMPC_NORM {_norm_code(ctrl.norm)}")
+        out.append(f"#define CMPC_NORM {_norm_code(spec.norm)}")
         out.append("")
         for name, v in (("cmpc_lbz", h.lbz), ("cmpc_ubz", h.ubz), ("cmpc_lbg", h.lbg),
                         ("cmpc_ubg", h.ubg), ("cmpc_check_lo", h.check_lo),
                         ("cmpc_check_hi", h.check_hi), ("cmpc_par_lo", h.param_lo),
                         ("cmpc_par_hi", h.param_hi), ("cmpc_u_lo", model.U.lo),
-                        ("cmpc_u_hi", model.U.hi), ("cmpc_x_ref", ctrl.x_ref),
-                        ("cmpc_u_ref", np.clip(ctrl.u_ref, model.U.lo, model.U.hi)),
-                        ("cmpc_C", ctrl.contract),
-                        ("cmpc_w_nom", ctrl.w_nominal if model.l else [])):
+                        ("cmpc_u_hi", model.U.hi), ("cmpc_x_ref", spec.x_ref),
+                        ("cmpc_u_ref", np.clip(spec.u_ref, model.U.lo, model.U.hi)),
+                        ("cmpc_C", spec.contract),
+                        ("cmpc_w_nom", spec.w_nominal if model.l else [])):
             out.append(_c_array("double", name, v))
-        out.append(f"#define CMPC_NC {ctrl.contract.shape[0]}")
+        out.append(f"#define CMPC_NC {spec.contract.shape[0]}")
         if self.S is not None:
             out.append(_c_array("double", "cmpc_S_A", self.S.A))
             out.append(_c_array("double", "cmpc_S_b", self.S.b))
@@ -587,7 +581,7 @@ class _ContractiveExport:
         return "\n".join(out)
 
     def header(self) -> str:
-        return T.header(self.ctrl.model, self.kind, self.solver, self.sizes)
+        return T.header(self.spec.model, self.kind, self.solver, self.sizes)
 
     def source(self) -> str:
         return T.contractive_source(self.intervals)

@@ -34,6 +34,9 @@ from ..sets.box import Box
 from ..sets.polytope import Polytope
 from ..solvers.engine import Status
 from ..solvers.result import Certificate, Result
+from ._fastcall import BufferedCall
+from ._stepcheck import NativeAfter
+from .spec import ContractiveSpec, HorizonProblem
 
 __all__ = ["ContractiveMPC", "MPCResult"]
 
@@ -381,18 +384,31 @@ class _Horizon:
         self.check_fun = ca.Function(f"check_{N}", [full], [pg.outputs[0]])
         self.check_lo = np.concatenate([ex["c_lo"], [-np.inf]])
         self.check_hi = np.concatenate([ex["c_hi"], [0.0]])
+        # the bounds interleaved as the enclosures (lo, hi per row), and the signs that turn
+        # enclosure - bound into the slacks Y_lo - lo and hi - Y_hi
+        self.check_bounds = np.stack([self.check_lo, self.check_hi], axis=1).reshape(-1)
+        self.check_signs = np.tile([1.0, -1.0], self.check_lo.size)
         self.labels = ex["labels"]
         self.n_state_rows = n * N
         self.exact_cost = ca.Function(f"cost_{N}", [full], [pg.outputs[1]])
         self._check_incl: InclusionFunction | None = None
+        self._step_check: NativeAfter | None = None
         # -- float graph: the local solver, predictions and ranking of candidates
         fl = _graph(mpc, N, exact=False)
         us, x0, xs, cost = fl["us"], fl["x0"], fl["xs"], fl["cost"]
         self.cost_fun = ca.Function(f"costf_{N}", [ca.vertcat(us, x0)], [cost])
         self.pred_fun = ca.Function(f"pred_{N}", [us, x0], [ca.horzcat(*xs)])
         self.cost_pred = ca.Function(f"costpred_{N}", [us, x0], [cost, ca.horzcat(*xs)])
+        # the states x(1..N) predicted from a control sequence, column after column: the
+        # start of the multiple-shooting states (the same graph as pred_fun)
+        self.start_states = ca.Function(f"start_{N}", [us, x0], [ca.vec(ca.horzcat(*xs[1:]))],
+                                        ["u", "x0"], ["x"])
         self._batch: dict[int, ca.Function] = {}
+        self._calls: _StepCalls | None = None
+        self._pred_call: BufferedCall | None = None
+        self._check_box: np.ndarray | None = None
         self.solver = None
+        self.plugin, self.options = _solver_options(mpc.solver, mpc.solver_options)
         if not nlp:
             return
         # the NLP: contraction scaled by s = 1 / ||C e_0||_p, constraints tightened; with
@@ -439,14 +455,54 @@ class _Horizon:
                     "g": ca.vertcat(nl["defects"], nl["common"], c_nlp)}
         self.bounds = {"lbx": ca.DM(self.lbz), "ubx": ca.DM(self.ubz),
                        "lbg": ca.DM(self.lbg), "ubg": ca.DM(self.ubg)}
-        plugin, opts = _solver_options(mpc.solver, mpc.solver_options)
-        self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", plugin, self.nlp, opts)
+        self.solver = ca.nlpsol(f"cmpc_{model.name}_{N}", self.plugin, self.nlp, self.options)
 
     @property
     def check_inclusion(self) -> InclusionFunction:
+        """The natural inclusion of :attr:`check_fun`."""
         if self._check_incl is None:
             self._check_incl = InclusionFunction(self.check_fun, "natural")
         return self._check_incl
+
+    @property
+    def step_check(self) -> NativeAfter:
+        """:attr:`check_inclusion` for the check of one sequence per step (on the native
+        backend after a few steps)."""
+        sc = self._step_check
+        if sc is None or sc.F is not self.check_inclusion:
+            sc = self._step_check = NativeAfter(self.check_inclusion)
+        return sc
+
+    def calls(self) -> _StepCalls:
+        """The per-step evaluations on preallocated arrays (built at the first use, and
+        again when :attr:`solver` has been replaced)."""
+        c = self._calls
+        if c is None or c.solver is not self.solver:
+            c = self._calls = _StepCalls(self)
+        return c
+
+    def predict(self, useq: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """``(cost, x_pred)``: the cost (4.22) of ``useq`` (shape (N, m)) from ``x`` and the
+        predicted states (N + 1, n), by the float graph (the values of :attr:`cost_pred`)."""
+        call = self._pred_call
+        if call is None:
+            call = self._pred_call = BufferedCall(self.cost_pred)
+        call.args[0][:] = useq.reshape(-1)
+        call.args[1][:] = x
+        call()
+        return float(call.res[0][0]), call.res[1].reshape(self.N + 1, self.n).copy()
+
+    def check_box(self, useq: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The box ``[u_seq, x, constants]`` of one sequence (shape (1, dim, 2), thin in
+        ``u_seq`` and ``x``), written into an array kept between calls."""
+        out = self._check_box
+        if out is None:
+            out = self._check_box = self.boxes(np.zeros((1, self.N * self.m)),
+                                               np.zeros(self.n))
+        j = self.N * self.m
+        out[0, :j] = useq.reshape(-1, 1)
+        out[0, j:j + self.n] = x.reshape(-1, 1)
+        return out
 
     def boxes(self, useqs: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Boxes ``[u_seq, x, constants]`` of the exact graph's input, shape (K, dim, 2):
@@ -461,6 +517,62 @@ class _Horizon:
         out[:, j + x.size:, 0] = self.param_lo
         out[:, j + x.size:, 1] = self.param_hi
         return out
+
+
+class _StepCalls:
+    """The evaluations of one controller step at horizon N on arrays kept between steps:
+    the start states (:attr:`_Horizon.start_states`), the NLP solver and the cost of a
+    sequence. The solver's ``x0`` and ``p`` inputs are :attr:`z0` and :attr:`p`, the start
+    states read their inputs from them. A solver that is not a ``casadi.Function`` (a
+    stand-in with the keyword interface of ``nlpsol`` and a ``stats()`` method) is called as
+    such."""
+
+    def __init__(self, h: _Horizon) -> None:
+        n, nm = h.n, h.N * h.m
+        self.solver = h.solver
+        self.z0 = np.zeros(h.n_z)
+        self.p = np.zeros(n + 1)
+        self.lam_x0 = np.zeros(h.n_z)
+        self.lam_g0 = np.zeros(h.lbg.size)
+        # multiple shooting: the start states are written straight into z0
+        res = {0: self.z0[nm + h.n_t:]} if h.n_zx else None
+        self.start = BufferedCall(h.start_states, args={0: self.z0[:nm], 1: self.p[:n]},
+                                  res=res)
+        self.solve: BufferedCall | None = None
+        self.out: dict[str, np.ndarray] = {}
+        S = h.solver
+        if isinstance(S, ca.Function):
+            idx = {name: S.index_in(name) for name in S.name_in()}
+            self.solve = BufferedCall(S, args={idx["x0"]: self.z0, idx["p"]: self.p,
+                                               idx["lam_x0"]: self.lam_x0,
+                                               idx["lam_g0"]: self.lam_g0},
+                                      interruptible=True)
+            for name, v in (("lbx", h.lbz), ("ubx", h.ubz), ("lbg", h.lbg), ("ubg", h.ubg)):
+                self.solve.args[idx[name]][:] = v
+            self.out = {name: self.solve.res[S.index_out(name)] for name in S.name_out()}
+        self.bounds = h.bounds
+
+    def run(self, warm: bool) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, Any]:
+        """Solve from :attr:`z0`, :attr:`p` and (``warm``) the multipliers in
+        :attr:`lam_x0`, :attr:`lam_g0`: ``(x, f, lam_x, lam_g, stats source)``; the arrays
+        are overwritten by the next call. Ctrl-C raises ``KeyboardInterrupt``."""
+        if self.solve is not None:
+            try:
+                if not warm:
+                    self.lam_x0.fill(0.0)
+                    self.lam_g0.fill(0.0)
+                self.solve()
+                o = self.out
+                return o["x"], float(o["f"][0]), o["lam_x"], o["lam_g"], self.solve
+            except RuntimeError:
+                pass  # the plain call below raises the solver's own error
+        kw = {"lam_x0": self.lam_x0, "lam_g0": self.lam_g0} if warm else {}
+        with solver_call():
+            sol = self.solver(x0=self.z0, p=self.p, **kw, **self.bounds)
+        return (np.asarray(sol["x"], dtype=float).ravel(),
+                float(np.asarray(sol["f"], dtype=float).reshape(-1)[0]),
+                np.asarray(sol["lam_x"], dtype=float).ravel(),
+                np.asarray(sol["lam_g"], dtype=float).ravel(), self.solver)
 
 
 # ------------------------------------------------------------------------- controller
@@ -582,6 +694,7 @@ class ContractiveMPC:
             raise ModelError(f"model '{model.name}' has no input to control")
         self.model = model
         n, m = model.n, model.m
+        self._n, self._m = n, m  # the model's sizes (read on every step)
         solver = str(solver).lower()
         if solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(_SOLVERS)}; got {solver!r}")
@@ -617,6 +730,8 @@ class ContractiveMPC:
                                  f"{np.shape(contract)}")
         if not np.isfinite(self.contract).all() or not self.contract.any():
             raise ValueError("contract must be finite and non-zero")
+        self._plain_distance = bool(np.array_equal(self.contract, np.eye(n))
+                                    and not self.x_ref.any())
         if terminal is not None:
             if not isinstance(terminal, Polytope):
                 raise TypeError("terminal must be a Polytope (use its convex hull for a "
@@ -664,7 +779,7 @@ class ContractiveMPC:
             raise ValueError(f"backoff must lie in [0, 0.1); got {backoff!r}")
         self._horizons: dict[int, Any] = {}
         self._warm: dict[int, np.ndarray] = {}
-        self._lam: dict[int, tuple[Any, Any]] = {}
+        self._lam: dict[int, bool] = {}  # horizons whose solver holds warm multipliers
         self._claims: dict[int, str] = {}
         self._queue: list[tuple[np.ndarray, np.ndarray, MPCResult]] = []
         self.last_result: MPCResult | None = None
@@ -794,7 +909,7 @@ class ContractiveMPC:
         """
         t0 = time.perf_counter()
         if self.mode == "sequence" and self._queue:
-            xk = _state(x, self.model.n)
+            xk = _state(x, self._n)
             u, x_pred, plan = self._queue[0]
             tol = 1e-9 * (1.0 + float(np.abs(x_pred).max()))
             if float(np.abs(xk - x_pred).max()) <= tol:
@@ -827,10 +942,12 @@ class ContractiveMPC:
         records: ``status``, ``certificate``, ``horizon``, ``solve_time``, ``mode``).
         """
         t0 = time.perf_counter()
-        xk = _state(x, self.model.n)
-        e0 = self.contract @ (xk - self.x_ref)
+        xk = _state(x, self._n)
+        # C = I and x_ref = 0: C (x - x_ref) is x (up to the sign of zeros)
+        e0 = xk if self._plain_distance else self.contract @ (xk - self.x_ref)
         r0 = self._norm_value(e0)
-        if np.array_equal(xk, self.x_ref):
+        # x = x_ref gives r0 = 0: the reference is tested among the small distances only
+        if not r0 >= _TINY and np.array_equal(xk, self.x_ref):
             res = self._special(xk, self.u_ref.copy(), "at_reference",
                                 "the state is the reference: u_ref is applied", t0)
         elif not r0 >= _TINY:
@@ -858,6 +975,8 @@ class ContractiveMPC:
         if self.gauge is not None:
             P = self.gauge
             return float(max(0.0, np.max(P.A @ e / (P.b - P.A @ self.x_ref))))
+        if self.norm == 2 and e.ndim == 1:  # what np.linalg.norm computes for a vector
+            return math.sqrt(float(e.dot(e)))
         return float(np.linalg.norm(e, ord=self.norm))
 
     def _in_local_set(self, x: np.ndarray) -> bool:
@@ -882,43 +1001,47 @@ class ContractiveMPC:
         if self.solver == "lp":
             return self._local_lp(x, N)
         h = self._get(N)
-        m = self.model.m
-        z0 = np.zeros(h.n_z)
+        m, n = self._m, self._n
+        nm = N * m
+        c = h.calls()
+        z0 = c.z0
         if start is not None:
-            z0[:N * m] = start.ravel()
+            z0[:nm] = start.ravel()
         else:
             warm = self._warm.get(N)
-            if warm is not None:
-                z0[:N * m] = np.concatenate([warm[1:], warm[-1:]]).ravel()
+            if warm is not None:  # the last sequence shifted by one move
+                z0[:nm - m] = warm[1:].ravel()
+                z0[nm - m:nm] = warm[-1]
             else:
-                z0[:N * m] = np.tile(np.clip(self.u_ref, self.model.U.lo, self.model.U.hi), N)
+                z0[:nm] = np.tile(np.clip(self.u_ref, self.model.U.lo, self.model.U.hi), N)
+        c.p[:n] = x
+        c.p[n] = 1.0 / r0
         if h.n_t or h.n_zx:
-            xp = h.pred_fun(z0[:N * m], x).full()
+            # the states x(1..N) predicted from the start sequence (with multiple shooting
+            # written into z0 as the start of the state variables)
+            c.start()
             if h.n_t:  # 1-norm slacks
-                eN = self.contract @ (xp[:, -1] - self.x_ref)
-                z0[N * m:N * m + h.n_t] = np.abs(eN) / r0 + 1e-3
-            if h.n_zx:  # multiple shooting: the states predicted from the start
-                z0[N * m + h.n_t:] = xp[:, 1:].ravel(order="F")
-        s = 1.0 / r0
-        lam = self._lam.get(N) if start is None else None
+                eN = self.contract @ (c.start.res[0][-n:] - self.x_ref)
+                z0[nm:nm + h.n_t] = np.abs(eN) / r0 + 1e-3
+        # the multipliers of the last solve at this horizon are in c.lam_x0, c.lam_g0
+        warm_lam = start is None and N in self._lam
         t = time.perf_counter()
-        warm = {"lam_x0": lam[0], "lam_g0": lam[1]} if lam is not None else {}
-        with solver_call():
-            sol = h.solver(x0=z0, p=np.concatenate([x, [s]]), **warm, **h.bounds)
+        z, f, lam_x, lam_g, src = c.run(warm_lam)
         dt = time.perf_counter() - t
-        stats = {"solver": self.solver, "solve_time": dt, "_fun": h.solver}
-        z = np.asarray(sol["x"], dtype=float).ravel()
+        stats = {"solver": self.solver, "solve_time": dt, "_fun": src}
         if not np.isfinite(z).all():
             self._lam.pop(N, None)
             _read_stats(stats)
             return None, stats
-        self._lam[N] = (sol["lam_x"], sol["lam_g"])
-        raw = z[:N * m].reshape(N, m)
+        np.copyto(c.lam_x0, lam_x)
+        np.copyto(c.lam_g0, lam_g)
+        self._lam[N] = True
+        raw = z[:nm].reshape(N, m)
         u = np.clip(raw, self.model.U.lo, self.model.U.hi)
-        if np.array_equal(u, raw) and not h.n_zx:
+        if not h.n_zx and np.array_equal(u, raw):
             # the NLP's cost is the sequence's only when the states are the composed
             # prediction (with multiple shooting they are the solver's, defects open)
-            stats["_cost"] = float(sol["f"])
+            stats["_cost"] = f
         return u, stats
 
     def _local_lp(self, x: np.ndarray, N: int) -> tuple[np.ndarray | None, dict]:
@@ -951,16 +1074,17 @@ class ContractiveMPC:
     def _check(self, x: np.ndarray, N: int, useq: np.ndarray) -> tuple[bool, dict]:
         """Interval re-evaluation of ``useq`` from the exact ``x``: (verified, details)."""
         h = self._get_check(N)
-        box = h.boxes(useq.reshape(1, -1), x)
-        Y = h.check_inclusion.evaluate_unchecked([box], 1)[0][0]
-        # slack >= 0 on every row <=> verified (NaN-free by the inclusion's contract)
-        slack = np.minimum(Y[:, 0] - h.check_lo, h.check_hi - Y[:, 1])
+        box = h.check_box(useq, x)
+        Y = h.step_check.evaluate_unchecked([box], 1)[0][0]
+        # slack >= 0 on every row <=> verified (NaN-free by the inclusion's contract): the
+        # slacks Y_lo - lo and hi - Y_hi = -(Y_hi - hi), both columns in one pass
+        slack = Y.reshape(-1) - h.check_bounds
+        slack *= h.check_signs
         margin = float(slack.min())
-        details = {"min_margin": margin, "contraction_upper": float(Y[-1, 1]),
-                   "_x_mid": 0.5 * Y[:h.n_state_rows, 0] + 0.5 * Y[:h.n_state_rows, 1]}
+        details = {"min_margin": margin, "contraction_upper": float(Y[-1, 1]), "_Y": Y}
         if margin >= 0:
             return True, details
-        bad = int(np.flatnonzero(~(slack >= 0))[0])
+        bad = int(np.flatnonzero(~(slack.reshape(-1, 2) >= 0).all(axis=1))[0])
         details["failed"] = self._describe_row(h, bad, Y[bad])
         return False, details
 
@@ -1051,7 +1175,7 @@ class ContractiveMPC:
 
     def _sequence(self, N: int, u: np.ndarray | None) -> None:
         """Refuse a sequence that does not belong to horizon N (shape (N, m))."""
-        if u is not None and np.shape(u) != (N, self.model.m):
+        if u is not None and np.shape(u) != (N, self._m):
             raise RuntimeError(
                 f"internal error: a control sequence of shape {np.shape(u)} was about to be "
                 f"used at horizon {N} (shape ({N}, {self.model.m}) expected)")
@@ -1153,9 +1277,7 @@ class ContractiveMPC:
 
     # results ------------------------------------------------------------------------
     def _predict(self, N: int, u: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
-        h = self._get_check(N)
-        c, xs = h.cost_pred(u.ravel(), x)
-        return float(c), np.asarray(xs, dtype=float).T
+        return self._get_check(N).predict(u, x)
 
     def _optimality(self, x: np.ndarray, N: int) -> dict:
         from ..solvers.minimize import minimize
@@ -1184,13 +1306,15 @@ class ContractiveMPC:
         self._sequence(N, u)
         self._warm[N] = u.copy()
         details = dict(details)
-        x_mid = details.pop("_x_mid", None)
+        Y = details.pop("_Y", None)
         cost = stats.pop("_cost", None)
         stats.pop("_fun", None)
-        if x_mid is None or cost is None:
+        if Y is None or cost is None:
             cost, xp = self._predict(N, u, x)
-        else:
-            xp = np.vstack([x, x_mid.reshape(N, self.model.n)])
+        else:  # the midpoints of the verified enclosures of x(1..N)
+            k = N * self._n
+            x_mid = 0.5 * Y[:k, 0] + 0.5 * Y[:k, 1]
+            xp = np.vstack([x, x_mid.reshape(N, self._n)])
         if proofs:
             details["proofs"] = proofs
         claim = self._claims.get(N)
@@ -1281,6 +1405,31 @@ class ContractiveMPC:
                          n_boxes=sum(int(p.get("boxes", 0)) for p in proofs),
                          elapsed=time.perf_counter() - t0, x=x, u=seq[0].copy(), u_seq=seq,
                          x_pred=xp, cost=cost, horizon=N, certificate=cert, stats=stats)
+
+    def export_spec(self) -> ContractiveSpec:
+        """The data the C export is generated from (see :mod:`casadi_cmpc.mpc.spec`).
+
+        Internal API shared with :mod:`casadi_cmpc.codegen`: the local problem of the fixed
+        horizon (``problem``; None without a fixed horizon or for the LP form), the local
+        law and its set, and the settings the generated controller follows.
+
+        Returns
+        -------
+        ContractiveSpec
+        """
+        problem = None
+        if self.horizon is not None and self.solver != "lp":
+            h = self._get(self.horizon)
+            problem = HorizonProblem(
+                horizon=h.N, nlp=h.nlp, plugin=h.plugin, options=dict(h.options), n_z=h.n_z,
+                n_t=h.n_t, n_zx=h.n_zx, lbz=h.lbz, ubz=h.ubz, lbg=h.lbg, ubg=h.ubg,
+                predict_states=h.start_states, check_fun=h.check_fun, check_lo=h.check_lo,
+                check_hi=h.check_hi, param_lo=h.param_lo, param_hi=h.param_hi)
+        return ContractiveSpec(
+            model=self.model, solver=self.solver, horizon=self.horizon, mode=self.mode,
+            gauge=self.gauge, norm=self.norm, contract=self.contract, x_ref=self.x_ref,
+            u_ref=self.u_ref, w_nominal=self.w_nominal, local_law=self._law,
+            local_set=self.local_set, problem=problem)
 
     def export_c(self, directory: Any, solver: str = "sqp", **kw: Any) -> Any:
         """Write this controller as standalone C (fixed horizon, receding mode); see

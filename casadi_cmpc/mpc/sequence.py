@@ -13,6 +13,8 @@ cannot be certified, the proving control stored with the sequence is applied ins
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import math
 import time
 import warnings
@@ -24,6 +26,7 @@ import numpy as np
 from .._interrupt import solver_call
 from .._validate import float_vector, weight_matrix
 from ..exceptions import CmpcWarning, DimensionError, ModelError
+from ..interval.compiler import InclusionFunction
 from ..interval.modal import SemanticExtension
 from ..model import Model
 from ..sets.polytope import Polytope
@@ -31,11 +34,17 @@ from ..solvers.engine import Status
 from ..solvers.minimax import MinimaxResult
 from ..solvers.minimax import minimax as _minimax
 from ..solvers.result import Certificate
+from ._fastcall import BufferedCall
+from ._stepcheck import NativeAfter
 from .contractive import MPCResult, _solver_options
+from .spec import SetSequenceSpec
 
 __all__ = ["SetSequenceMPC"]
 
 _MINIMAX_MODES = ("auto", "vertices", "interval")
+#: The blends u_w + t (u* - u_w) of the stored and the solver's control tried (one per row).
+_BLEND_STEPS = np.array([[0.75], [0.5], [0.25]])
+_BLEND_STEPS.flags.writeable = False
 _MINIMAX_KEYS = ("eps", "time_limit", "max_boxes", "w_depth", "w_depth_final", "mean_value")
 
 
@@ -49,12 +58,12 @@ def _model_key(model: Model) -> str:
     return model_key(model)
 
 
-def _first_max(c: np.ndarray) -> int:
+def _first_max(c: Any) -> int:
     """Index of the first largest finite entry of c (0 when none is finite); the C export
     picks the same."""
-    k, best = 0, -np.inf
+    k, best = 0, -math.inf
     for i, v in enumerate(c):
-        if np.isfinite(v) and v > best:
+        if math.isfinite(v) and v > best:
             k, best = i, v
     return k
 
@@ -102,6 +111,94 @@ def _minimax_options(opts: Any, U: Any, l: int) -> dict[str, Any]:
         raise ValueError(f"minimax_options['w_depth_final'] = {out['w_depth_final']} must be "
                          f">= w_depth = {out['w_depth']}")
     return out
+
+
+class _PointLocator:
+    """``seq.locate(x)`` for one point, on the sequence's grid of step boxes held as Python
+    lists (the same cells, faces and ties as the batched look-up
+    ``SetSequence._box_levels``, without its numpy calls on one point)."""
+
+    def __init__(self, seq: Any, grid: tuple[Any, Any, Any]) -> None:
+        edges, lev, box = grid
+        self.seq = seq
+        self.edges = [e.tolist() for e in edges]
+        self.lev = lev
+        self.box = box
+        self.n = len(edges)
+        self.witness = [np.asarray(st["witness"], dtype=float) for st in seq.steps]
+        self.bits = list(itertools.product((0, 1), repeat=self.n))
+
+    def box_level(self, x: np.ndarray) -> tuple[int, int]:
+        """``(level, box)`` of the point x from the step boxes (-1: in no box); on a cell
+        face the smallest level of the cells meeting there."""
+        cand = []
+        for j, v in enumerate(x.tolist()):
+            e = self.edges[j]
+            if not e[0] <= v <= e[-1]:
+                return -1, -1
+            k = len(e)
+            i = bisect.bisect_right(e, v) - 1
+            hi_i = min(max(i, 0), k - 2)
+            lo_i = min(max(i - 1, 0), k - 2) if i >= 0 and e[i] == v else hi_i
+            cand.append((lo_i, hi_i))
+        best, which = -1, -1
+        lev, box = self.lev, self.box
+        for bits in self.bits:
+            ix = tuple(cand[j][b] for j, b in enumerate(bits))
+            lv = int(lev[ix])
+            if lv > 0 and (best < 0 or lv < best):
+                best, which = lv, int(box[ix])
+        return best, which
+
+    def locate(self, x: np.ndarray) -> tuple[int | None, tuple[int, np.ndarray] | None]:
+        """``seq.locate(x)``: the level of x and the stored proving control of its box."""
+        lv, bx = self.box_level(x)
+        wit = (lv, self.witness[lv - 1][bx].copy()) if lv >= 1 else None
+        if bool(np.asarray(self.seq.sets[0].contains(x))):
+            return 0, wit
+        return (None if lv < 0 else lv), wit
+
+
+class _OneStepCalls:
+    """The evaluations of one step on arrays kept between steps: the solver's start, the
+    NLP solver (parameter ``p = [x, vec(H), h, cs]``) and the cost. A solver that is not a
+    ``casadi.Function`` is called as such."""
+
+    def __init__(self, ctrl: SetSequenceMPC) -> None:
+        S = ctrl._nlp
+        self.solver = S
+        self.solve: BufferedCall | None = None
+        n, m, r = ctrl._n, ctrl._m, ctrl._rmax
+        self.z0 = np.zeros(m + 1)  # [v, t]
+        self.p = np.zeros(n + r * n + r + 1)  # [x, vec(H), h, cs]
+        self.lam_g0 = np.zeros(ctrl._ng)
+        self.lbx = np.concatenate([ctrl._v_lo, [-np.inf]])
+        self.ubx = np.concatenate([ctrl._v_hi, [np.inf]])
+        if isinstance(S, ca.Function):
+            idx = {name: S.index_in(name) for name in S.name_in()}
+            self.solve = BufferedCall(S, args={idx["x0"]: self.z0, idx["p"]: self.p,
+                                               idx["lam_g0"]: self.lam_g0},
+                                      interruptible=True)
+            for name, v in (("lbx", self.lbx), ("ubx", self.ubx), ("lbg", -np.inf),
+                            ("ubg", 0.0)):
+                self.solve.args[idx[name]][:] = v
+            self.x_out = self.solve.res[S.index_out("x")]
+        self.start = BufferedCall(ctrl._start)
+        self.cost = BufferedCall(ctrl._costfun)
+
+    def run(self) -> tuple[np.ndarray, Any]:
+        """Solve from :attr:`z0`, :attr:`p`, :attr:`lam_g0`: ``(x, stats source)``; Ctrl-C
+        raises ``KeyboardInterrupt``."""
+        if self.solve is not None:
+            try:
+                self.solve()
+                return self.x_out, self.solve
+            except RuntimeError:
+                pass  # the plain call below raises the solver's own error
+        with solver_call():
+            sol = self.solver(x0=self.z0, p=self.p, lbx=self.lbx, ubx=self.ubx,
+                              lbg=-np.inf, ubg=0.0, lam_g0=self.lam_g0)
+        return np.asarray(sol["x"], dtype=float).reshape(-1), self.solver
 
 
 class SetSequenceMPC:
@@ -250,6 +347,13 @@ class SetSequenceMPC:
         self.contract = np.eye(n)  # the whole state is driven to x_ref (for reports)
         self.last_info: dict[str, Any] = {}
         self._xnext: np.ndarray | None = None
+        self._n, self._m = n, m
+        self._calls: _OneStepCalls | None = None
+        self._locator: _PointLocator | bool | None = None
+        self._rows_cache: dict[tuple[int, int], Any] = {}
+        self._native: dict[int, tuple[Any, Any]] = {}
+        self._w_text: str | None = None
+        self._W1 = self._Wbox[None]  # (1, l, 2): W for every candidate
 
     def _local_law(self, local_law: Any) -> tuple[ca.Function | None, bool]:
         """The law applied in T and whether T is proven invariant under it (for the W this
@@ -323,6 +427,14 @@ class SetSequenceMPC:
         self._mm_r = r
 
     def _rows(self, j: int, r: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The rows of the target ``K_j`` padded to r rows (see :meth:`_target_rows`),
+        computed once per level."""
+        key = (j, r)
+        if key not in self._rows_cache:
+            self._rows_cache[key] = self._target_rows(j, r)
+        return self._rows_cache[key]
+
+    def _target_rows(self, j: int, r: int) -> tuple[np.ndarray, np.ndarray] | None:
         """``(H, h)`` padded to r rows: the latest polytope of ``K_j`` (P_j, or T) when K_j
         is held by polytopes only, its offsets tightened by 1e-6 of each row's scale so that
         a control on a facet passes the interval check (the tightening claims nothing); None
@@ -411,51 +523,118 @@ class SetSequenceMPC:
         return ca.Function("start", [x, u], [u0, ca.substitute(cvec, u, u0)],
                            ["x", "u_guess"], ["u0", "costs"])
 
-    def _initial(self, x: np.ndarray, ug: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, float]:
-        """The solver's start ``(z_0, lam_g0, cs)``: ``u_0`` from :meth:`_start_function`
-        (as the scaled ``v_0``), the epigraph variable at the largest vertex cost ``c_k``
-        and multiplier 1 on that row, 0 elsewhere; ``cs = 1 / c_k`` (1 when ``c_k`` is 0 or
-        not finite) scales the costs. Such a start satisfies complementarity:
-        ``sqpmethod``, whose convergence test does not check it, would otherwise stop at
-        once where the mean cost is stationary. The exported C does the same."""
-        u0, c = self._start(x, ug)
-        u0 = np.asarray(u0, dtype=float).reshape(-1)
-        c = np.asarray(c, dtype=float).reshape(-1)
-        k = _first_max(c)
-        cs = 1.0 / c[k] if np.isfinite(c[k]) and c[k] > 0 else 1.0
-        lam = np.zeros(self._ng)
+    def _initial(self, x: np.ndarray, ug: np.ndarray) -> float:
+        """The solver's start, written into its input arrays: ``u_0`` from
+        :meth:`_start_function` (as the scaled ``v_0``), the epigraph variable at the largest
+        vertex cost ``c_k`` and multiplier 1 on that row, 0 elsewhere; returns ``cs = 1 /
+        c_k`` (1 when ``c_k`` is 0 or not finite), which scales the costs. Such a start
+        satisfies complementarity: ``sqpmethod``, whose convergence test does not check it,
+        would otherwise stop at once where the mean cost is stationary. The exported C does
+        the same."""
+        calls = self._step_calls()
+        st = calls.start
+        st.args[0][:] = x
+        st.args[1][:] = ug
+        st()
+        u0, c = st.res
+        k = _first_max(c.tolist())
+        ck = float(c[k])
+        cs = 1.0 / ck if math.isfinite(ck) and ck > 0 else 1.0
+        m = self._m
+        z0 = calls.z0
+        np.subtract(u0, self._u_mid, out=z0[:m])
+        z0[:m] /= self._u_half
+        z0[m] = cs * ck
+        lam = calls.lam_g0
+        lam.fill(0.0)
         lam[k * self._stride] = 1.0
-        v0 = (u0 - self._u_mid) / self._u_half
-        return np.concatenate([v0, [cs * c[k]]]), lam, cs
+        return cs
+
+    def _step_calls(self) -> _OneStepCalls:
+        """The per-step evaluations (built at the first use, and again when the solver has
+        been replaced)."""
+        c = self._calls
+        if c is None or c.solver is not self._nlp:
+            c = self._calls = _OneStepCalls(self)
+        return c
 
     def _target(self, i: int) -> Any:
-        if i not in self._targets:
-            self._targets[i] = self._target_cls(self.model, self.seq.sets[i])
-        return self._targets[i]
+        """The proven test ``f(X, U, W) ⊆ K_i`` (built once per level), its inclusion
+        functions moving to the native backend after a few steps (:class:`NativeAfter`)."""
+        t = self._targets.get(i)
+        if t is None:
+            t = self._target_cls(self.model, self.seq.sets[i])
+            t.polys = [(self._native_form(F), c, b) for F, c, b in t.polys]
+            if t.F is not None:
+                t.F = self._native_form(t.F)
+            self._targets[i] = t
+        return t
+
+    def _native_form(self, F: InclusionFunction) -> Any:
+        """``F`` (an inclusion function shared with the model's other users) for the checks
+        of this controller: one :class:`NativeAfter` per function, shared by the levels, on
+        the native backend once it has evaluated a few steps."""
+        got = self._native.get(id(F))
+        if got is None:
+            got = self._native[id(F)] = (F, NativeAfter(F))
+        return got[1]
 
     def _certify(self, x: np.ndarray, U: np.ndarray, i: int) -> np.ndarray:
         """Proven ``f(x, u, W) ⊆ K_i`` and ``u in U`` per candidate row of ``U``."""
         U = np.atleast_2d(U)
-        inU = self.model.U.contains(U) & np.isfinite(U).all(axis=1)
-        ok = np.zeros(U.shape[0], dtype=bool)
-        idx = np.flatnonzero(inU)
-        if idx.size:
-            X = np.broadcast_to(np.stack([x, x], axis=-1), (idx.size, x.size, 2))
-            Ub = np.stack([U[idx], U[idx]], axis=-1)
-            W = self._Wbox[None]
-            ok[idx] = self._target(i).inside(np.ascontiguousarray(X), Ub, W)
-        return ok
+        box = self.model.U
+        inU = ((U >= box.lo) & (U <= box.hi)).all(axis=1) & np.isfinite(U).all(axis=1)
+        if not inU.all():
+            ok = np.zeros(U.shape[0], dtype=bool)
+            idx = np.flatnonzero(inU)
+            if idx.size:
+                ok[idx] = self._certify(x, U[idx], i)
+            return ok
+        k = U.shape[0]
+        X = np.empty((k, x.size, 2))
+        X[...] = x[:, None]
+        Ub = np.empty((k, U.shape[1], 2))
+        Ub[...] = U[:, :, None]
+        return self._target(i).inside(X, Ub, self._W1)
 
     def _cost(self, x: np.ndarray, u: np.ndarray) -> float:
         """The cost's maximum over the vertices of W (the nominal w when not robust)."""
-        c, xn = self._costfun(x, u)
-        self._xnext = np.asarray(xn, dtype=float).reshape(-1)
-        return float(c)
+        call = self._step_calls().cost
+        call.args[0][:] = x
+        call.args[1][:] = u
+        call()
+        c, xn = call.res
+        self._xnext = xn.copy()
+        return float(c[0])
 
     def __repr__(self) -> str:
         return (f"SetSequenceMPC(model='{self.model.name}', sets={len(self.seq)}, "
                 f"solver='{self.solver}', robust={self.robust}, minimax='{self.minimax}')")
+
+    def export_spec(self) -> SetSequenceSpec:
+        """The data the C export is generated from (see :mod:`casadi_cmpc.mpc.spec`).
+
+        Internal API shared with :mod:`casadi_cmpc.codegen`: the sequence and its grid of
+        step boxes, the local law, the one-step NLP with its parameters per target level,
+        the solver's start and the scaling of the control.
+
+        Returns
+        -------
+        SetSequenceSpec
+        """
+        seq, n, r = self.seq, self._n, self._rmax
+        rows = []
+        for j in range(len(seq.sets) - 1 if r else 0):
+            got = self._rows(j, r)
+            rows.append(got if got is not None else (np.zeros((r, n)), np.ones(r)))
+        grid = seq._grid() if hasattr(seq, "_grid") else None
+        nlp, plugin, options = self._nlp_spec
+        return SetSequenceSpec(
+            model=self.model, seq=seq, members=[_members(S) for S in seq.sets], grid=grid,
+            robust=self.robust, minimax=self.minimax, local_law=self._law,
+            polytopic=self._polytopic, rows=r, nlp_rows=rows, nlp=nlp, plugin=plugin,
+            options=dict(options), start=self._start, w_vertices=self._w_vertices,
+            u_mid=self._u_mid, u_half=self._u_half, v_lo=self._v_lo, v_hi=self._v_hi)
 
     def export_c(self, directory: Any, solver: str = "sqp", **kw: Any) -> Any:
         """Write this controller as standalone C: the one-step solver, the model, the local
@@ -488,7 +667,13 @@ class SetSequenceMPC:
                 "is not certified (e.g. x outside every K_i) says so in its label")
 
     def _w_claim(self) -> str:
-        """Which disturbances a claim of this controller covers."""
+        """Which disturbances a claim of this controller covers (built once)."""
+        text = self._w_text
+        if text is None:
+            text = self._w_text = self._w_claim_text()
+        return text
+
+    def _w_claim_text(self) -> str:
         if not self.model.l:
             return ""
         if self.robust:
@@ -509,13 +694,9 @@ class SetSequenceMPC:
     def solve(self, x: Any) -> MPCResult:
         """Solve the one-step problem at ``x``; see the class notes."""
         t0 = time.perf_counter()
-        model = self.model
-        n, m = model.n, model.m
+        n, m = self._n, self._m
         x = float_vector(x, n, "x", None)
-        if hasattr(self.seq, "locate"):
-            lvl, wit = self.seq.locate(x)
-        else:
-            lvl, wit = self.seq.level(x), None
+        lvl, wit = self._locate(x)
         nan_u = np.full(m, np.nan)
         stats: dict[str, Any] = {"solver": self.solver, "level": lvl}
         if lvl is None:
@@ -555,9 +736,9 @@ class SetSequenceMPC:
         if u_opt is not None:
             cands.append((u_opt, "solver"))
         if u_w is not None:
-            if u_opt is not None:
-                cands += [(u_w + tt * (u_opt - u_w), "blend of solver and stored control")
-                          for tt in (0.75, 0.5, 0.25)]
+            if u_opt is not None:  # u_w + t (u_opt - u_w), t = 3/4, 1/2, 1/4
+                blends = u_w + _BLEND_STEPS * (u_opt - u_w)
+                cands += [(b, "blend of solver and stored control") for b in blends]
             cands.append((u_w, "stored control"))
         mm: MinimaxResult | None = None
         if self.minimax == "interval":
@@ -578,8 +759,9 @@ class SetSequenceMPC:
         ok[0] = self._certify(x, C[:1], j)[0]  # the optimiser's control first
         if not ok[0] and C.shape[0] > 1:
             ok[1:] = self._certify(x, C[1:], j)
-        # the witness proves x's box into the target of its own step (a subset of K_{lvl-1})
-        if u_w is not None and not ok[-1] and wit[0] <= lvl:
+        # the witness proves x's box into the target of its own step (a subset of K_{lvl-1});
+        # needed only when no candidate before it is certified
+        if u_w is not None and not ok.any() and wit[0] <= lvl:
             ok[-1] = self._certify(x, C[-1:], wit[0] - 1)[0]
         stats["verify_time"] = time.perf_counter() - tv
         k = np.flatnonzero(ok)
@@ -599,6 +781,30 @@ class SetSequenceMPC:
                            {"candidates": int(C.shape[0]), "chosen": int(k[0]),
                             "source": src})
         return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc", Status.PROVED, t0)
+
+    def _locate(self, x: np.ndarray) -> tuple[int | None, tuple[int, np.ndarray] | None]:
+        """``(level, witness)`` of x: :meth:`SetSequence.locate`, by a point look-up on the
+        grid of the step boxes (built once) when the sequence has one."""
+        loc = self._locator
+        if loc is None:
+            loc = self._locator = self._point_locator()
+        if loc is not False:
+            return loc.locate(x)
+        if hasattr(self.seq, "locate"):
+            return self.seq.locate(x)
+        return self.seq.level(x), None
+
+    def _point_locator(self) -> _PointLocator | bool:
+        """The point look-up, or False when ``seq.locate`` does not read a grid of step
+        boxes with their proving controls."""
+        seq = self.seq
+        index = getattr(seq, "_index", None)
+        if not hasattr(seq, "locate") or index is None:
+            return False
+        grid = index()
+        if grid is None or any(st.get("witness") is None for st in seq.steps):
+            return False
+        return _PointLocator(seq, grid)
 
     # ---------------------------------------------------------------- interval minimax
     def _minimax_kw(self) -> dict[str, Any]:
@@ -664,23 +870,23 @@ class SetSequenceMPC:
 
     def _solve_nlp(self, x: np.ndarray, j: int, stats: dict,
                    u0: np.ndarray | None) -> np.ndarray | None:
-        m, n, r = self.model.m, self.model.n, self._rmax
-        rows = self._rows(j, r) if r else None
-        H, h = rows if rows is not None else (np.zeros((r, n)), np.ones(r))
-        lbx = np.concatenate([self._v_lo, [-np.inf]])
-        ubx = np.concatenate([self._v_hi, [np.inf]])
+        n, r = self._n, self._rmax
+        calls = self._step_calls()
+        p = calls.p
+        p[:n] = x
+        if r:
+            rows = self._rows(j, r)
+            H, h = rows if rows is not None else (np.zeros((r, n)), np.ones(r))
+            p[n:n + r * n] = H.ravel(order="F")
+            p[n + r * n:n + r * n + r] = h
         try:
-            z0, lam0, cs = self._initial(x, self.model.U.mid if u0 is None else u0)
-            p = np.concatenate([x, H.ravel(order="F"), h, [cs]])
-            with solver_call():
-                sol = self._nlp(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=-np.inf, ubg=0.0,
-                                lam_g0=lam0)
+            p[-1] = self._initial(x, self.model.U.mid if u0 is None else u0)
+            z, src = calls.run()
         except RuntimeError as exc:
             stats["return_status"] = str(exc)
             return None
-        st = self._nlp.stats()
-        stats["return_status"] = st.get("return_status")
-        v = np.asarray(sol["x"], dtype=float).reshape(-1)[:m]
+        stats["return_status"] = src.stats().get("return_status")
+        v = z[:self._m]
         u = np.minimum(np.maximum(self._u_mid + self._u_half * v, self.model.U.lo),
                        self.model.U.hi)
         return u if np.isfinite(v).all() else None
@@ -689,8 +895,7 @@ class SetSequenceMPC:
               cert: Certificate, stats: dict, mode: str, status: Status,
               t0: float) -> MPCResult:
         el = time.perf_counter() - t0
-        model = self.model
-        xp = np.full((2, model.n), np.nan)
+        xp = np.full((2, self._n), np.nan)
         xp[0] = x
         if np.isfinite(u).all():
             if self._xnext is None:
