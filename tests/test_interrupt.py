@@ -80,7 +80,7 @@ def test_cmpc_run_interrupted_during_the_set_computation_then_run_again(tmp_path
     file; the next run computes the sequence, caches it and succeeds."""
     cache = tmp_path / "cache"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    cmd = [sys.executable, "-m", "casadi_cmpc", "run", "cannon", "--steps", "3",
+    cmd = [sys.executable, "-m", "casadi_cmpc", "run", "cstr", "--steps", "3",
            "--no-progress", "--cache", str(cache)]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=env)
@@ -88,7 +88,7 @@ def test_cmpc_run_interrupted_during_the_set_computation_then_run_again(tmp_path
     line = ""
     while "model" not in line.lower() and time.monotonic() < deadline:  # summary printed
         line = p.stdout.readline()
-    time.sleep(1.5)  # the sequence takes several seconds: this lands inside it
+    time.sleep(1.5)  # the CSTR sequence takes several seconds: this lands inside it
     p.send_signal(signal.SIGINT)
     try:
         out, err = p.communicate(timeout=60)

@@ -18,10 +18,11 @@ Chunk sizes follow the measured cost: about :data:`TARGET_S` seconds of work per
 task costs about 1 ms of overhead, a process-pool task less), from the cost per element of
 the previous level; levels with less work than two tasks run in the driver.
 
-The classifier is serialised once per level (pickle, CasADi expressions in one shared
-context; closures need ``cloudpickle``, which the ``[dask]`` extra installs) and rebuilt once
-per worker process (kept by a hash of its bytes), so that its compiled evaluators and their
-native kernels are reused across chunks and levels. A worker process that dies is replaced
+The classifier is serialised once (pickle, CasADi expressions in one shared context;
+closures need ``cloudpickle``, which the ``[dask]`` extra installs), sent with the first
+tasks only and rebuilt once per worker process (kept by a hash of its bytes), so that its
+compiled evaluators and their native kernels are reused across chunks and levels; a worker
+that has not seen it asks for it again. A worker process that dies is replaced
 by classifying its chunk in the driver (with a warning); no chunk is lost, and an exception
 raised by the classifier itself is raised again.
 """
@@ -68,9 +69,14 @@ def _dumps(obj: Any) -> bytes:
             return cloudpickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
 
 
-def _classifier(blob: bytes, key: str) -> Any:
+_MISSING = "missing classifier"  # a worker's answer to a task without the classifier's bytes
+
+
+def _classifier(blob: bytes | None, key: str) -> Any:
     clf = _WORKER_CACHE.get(key)
     if clf is None:
+        if blob is None:
+            return None
         with ca.global_unpickle_context():
             clf = _WORKER_CACHE[key] = pickle.loads(blob)
         while len(_WORKER_CACHE) > 8:
@@ -80,11 +86,14 @@ def _classifier(blob: bytes, key: str) -> Any:
     return clf
 
 
-def _classify_chunk(blob: bytes, key: str, chunk: Any) -> tuple[Any, Any, float]:
+def _classify_chunk(blob: bytes | None, key: str, chunk: Any) -> tuple[Any, Any, float]:
     """Worker side: (labels, or the :meth:`map` part of a two-phase classifier; the chunk's
-    per-element data; seconds)."""
+    per-element data; seconds). ``blob`` None: the classifier of ``key`` was sent to this
+    process before; :data:`_MISSING` if it was not."""
     t0 = time.perf_counter()
     clf = _classifier(blob, key)
+    if clf is None:
+        return _MISSING, None, 0.0
     if _two_phase(clf):
         out: Any = clf.map(chunk)
     else:
@@ -133,6 +142,7 @@ class LevelRunner:
         self.n_workers = _workers(executor) if executor is not None else 1
         self.n_tasks = 0
         self._blob: tuple[int, bytes, str] | None = None
+        self._shipped: dict[str, int] = {}  # classifier key -> tasks that carried its bytes
 
     def __call__(self, classify: Any, frontier: Any) -> np.ndarray:
         N = len(frontier)
@@ -168,7 +178,15 @@ class LevelRunner:
         size = max(size, MIN_CHUNK)
         bounds = [(a, min(a + size, N)) for a in range(0, N, size)]
         chunks = [frontier.take(np.arange(a, b)) for a, b in bounds]
-        futures = [self.executor.submit(_classify_chunk, blob, key, c) for c in chunks]
+        futures = []
+        for c in chunks:
+            # the classifier's bytes go with the first tasks only (each worker keeps it);
+            # a worker that never got them answers _MISSING and the chunk goes again
+            shipped = self._shipped.get(key, 0)
+            ship = shipped < 2 * self.n_workers
+            self._shipped[key] = shipped + ship
+            futures.append(self.executor.submit(_classify_chunk, blob if ship else None, key,
+                                                c))
         self.n_tasks += len(futures)
         two = _two_phase(classify)
         labels = np.empty(N, dtype=np.int8)
@@ -178,6 +196,9 @@ class LevelRunner:
             for (a, b), chunk, fut in zip(bounds, chunks, futures, strict=True):
                 try:
                     lab, data, dt = fut.result()
+                    if isinstance(lab, str) and lab == _MISSING and self.executor is not None:
+                        lab, data, dt = self.executor.submit(_classify_chunk, blob, key,
+                                                             chunk).result()
                 except BrokenProcessPool as exc:
                     warnings.warn(f"a worker process died ({exc}); its chunk of {b - a} "
                                   "elements is classified in the driver", CmpcWarning,

@@ -211,3 +211,28 @@ def test_quantified_sivia_through_the_modal_one_step_set_on_a_pool(pool):
     b = cm.one_step_set(ex.model, ex.terminal, 0.1, method="modal", progress=False,
                         executor=pool)
     assert a.paving.n_inner > 0 and _same_paving(a.paving, b.paving)
+
+
+def test_e9_robust_sequence_is_the_same_serial_on_a_pool_and_on_dask(pool, monkeypatch):
+    """The acceptance case: the E9 robust controllable sequence at eps 0.025 (the levels
+    with more than 20 ms of work cut into tasks of 10 ms)."""
+    monkeypatch.setattr(_parallel, "TARGET_S", 0.01)
+    ex = cm.models.load("cannon_robust")
+
+    def run(executor=None):
+        seq = cm.controllable_sets(ex.model, ex.terminal, 0.025, robust=True,
+                                   law=ex.local_law, progress=False, executor=executor)
+        return [s["boxes"] for s in seq.steps], [s["witness"] for s in seq.steps]
+
+    ref = run()
+    runs = [run(pool)]
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        runs.append(run(client.get_executor()))
+    for boxes, wit in runs:
+        assert len(boxes) == len(ref[0]) > 10
+        assert all(np.array_equal(a, b) for a, b in zip(boxes, ref[0], strict=True))
+        assert all(np.array_equal(a, b, equal_nan=True)
+                   for a, b in zip(wit, ref[1], strict=True))
