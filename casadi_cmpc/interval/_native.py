@@ -221,12 +221,12 @@ CIV_INLINE civ civ_out(civ a) {
 
 def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[str],
                 n_extra_out: int = 0) -> str:
-    """The batch loop around a per-box ``body``: blocks of ``CMPC_L`` boxes, each input copied
-    into lane-major arrays ``B<i>[2 d_i][CMPC_L]`` (a short last block repeats its first
-    box), the body run for every lane ``l`` of the block in one loop a compiler can
-    vectorise (it writes ``Q<o>[2 d_o][CMPC_L]``), the outputs copied back for the boxes of
-    the block. ``size_in[i] == 0``: input ``i`` is not read. ``n_extra_out`` outputs
-    follow, of the sizes of ``size_out`` again."""
+    """The batch loop around a per-box ``body``: blocks of ``CMPC_L`` boxes (the last one
+    shorter), each input copied into lane-major arrays ``B<i>[2 d_i][CMPC_L]``, the body run
+    for every lane ``l`` of the block in one loop a compiler can vectorise (it writes
+    ``Q<o>[2 d_o][CMPC_L]``), the outputs copied back for the boxes of the block.
+    ``size_in[i] == 0``: input ``i`` is not read. ``n_extra_out`` outputs follow, of the
+    sizes of ``size_out`` again."""
     sizes = list(size_out) * (1 + n_extra_out)
     L = ["void cmpc_batch(long n, const double *const *in, const long *st, "
          "double *const *out) {",
@@ -239,15 +239,15 @@ def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[
             L.append(f"        double B{i}[{2 * d}][CMPC_L];")
     for o, d in enumerate(sizes):
         L.append(f"        double Q{o}[{max(2 * d, 1)}][CMPC_L] = {{{{0.0}}}};")
-    L.append("        for (l = 0; l < CMPC_L; ++l) {")
-    L.append("            long bb = b0 + (l < m ? l : 0);")
+    L.append("        for (l = 0; l < m; ++l) {")
+    L.append("            long bb = b0 + l;")
     for i, d in enumerate(size_in):
         if d:
             L += [f"            const double *P{i} = in[{i}] + bb * st[{i}];",
                   f"            for (k = 0; k < {2 * d}; ++k) B{i}[k][l] = P{i}[k];"]
     L += ["        }",
           "        #pragma omp simd",
-          "        for (l = 0; l < CMPC_L; ++l) {",
+          "        for (l = 0; l < m; ++l) {",
           *body,
           "        }",
           "        for (l = 0; l < m; ++l) {"]
