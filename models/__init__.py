@@ -20,6 +20,14 @@ Names and thesis examples (numbers as in the example catalogue)::
     khalil_affine_control   E12  Khalil system with affine control part (§6.3.5)
     mirosot             E13  MiroSot robot ARX model with input delay (§7.1)
 
+Further examples, not from the thesis (``info["example"] == "extra"``), each with a
+terminal set certified by :func:`casadi_cmpc.terminal_set` (its numbers stored in the
+module, so that the import stays fast) and the local law that proves it::
+
+    cartpole            4 states: cart-pole balanced upright, RK4 dt = 0.05 s
+    three_tank          3 states: three tanks in a cascade, sqrt outflows, levels held at
+                        a non-zero equilibrium, RK4 dt = 5 s
+
 Terminal sets given here are the thesis data where the thesis prints them; where it
 does not (E11, E12) they are choices recorded in ``info["choices"]`` and are *not*
 certified by this module.
@@ -52,12 +60,15 @@ _REGISTRY: dict[str, str] = {
     "khalil_affine_state": "khalil_affine_state",
     "khalil_affine_control": "khalil_affine_control",
     "mirosot": "mirosot",
+    "cartpole": "cartpole",
+    "three_tank": "three_tank",
 }
 
 
 @dataclass(frozen=True, eq=False)
 class Example:
-    """One thesis example: a model with its terminal set, local law and initial states.
+    """One example (of the thesis, or an extra one): a model with its terminal set, local
+    law and initial states.
 
     Attributes
     ----------
@@ -118,7 +129,8 @@ class Example:
 
 
 def names() -> list[str]:
-    """Names accepted by :func:`load`, in the order of the thesis examples."""
+    """Names accepted by :func:`load`: the thesis examples in their order, then the
+    further examples."""
     return list(_REGISTRY)
 
 

@@ -23,6 +23,8 @@ ALL_NAMES = [
     "linear_sliding", "cannon_001", "cstr", "grimm", "cannon", "cannon_robust",
     "cannon_robust_wide", "khalil_affine_state", "khalil_affine_control", "mirosot",
 ]
+# examples not from the thesis (tests/test_extra_models.py)
+EXTRA_NAMES = ["cartpole", "three_tank"]
 
 # name -> (n, m, l, X (n, 2), U (m, 2), W (l, 2) or None, E-number)
 EXPECTED = {
@@ -75,9 +77,9 @@ def _random_args(ex: Example, n: int = 50):
 
 
 # ---------------------------------------------------------------- registry
-def test_names_are_the_ten_examples():
-    assert names() == ALL_NAMES
-    assert cm.models.names() == ALL_NAMES
+def test_names_are_the_ten_thesis_examples_then_the_extra_ones():
+    assert names() == ALL_NAMES + EXTRA_NAMES
+    assert cm.models.names() == ALL_NAMES + EXTRA_NAMES
 
 
 def test_unknown_name_lists_valid_names():

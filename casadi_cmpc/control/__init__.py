@@ -1,4 +1,5 @@
-"""Control-set computations: pre-sets, controllable-set sequences, polytopic approximation."""
+"""Control-set computations: pre-sets, controllable-set sequences, polytopic approximation,
+invariance certificates and the search for certified terminal sets."""
 
 from .controllable import *  # noqa: F401,F403
 from .controllable import __all__ as _controllable_all  # noqa: F401
@@ -10,6 +11,8 @@ from .linear_sets import *  # noqa: F401,F403
 from .linear_sets import __all__ as _linear_all  # noqa: F401
 from .polytopic import *  # noqa: F401,F403
 from .polytopic import __all__ as _polytopic_all  # noqa: F401
+from .terminal import *  # noqa: F401,F403
+from .terminal import __all__ as _terminal_all  # noqa: F401
 
 __all__ = (list(_law_all) + list(_controllable_all) + list(_linear_all)
-           + list(_invariance_all) + list(_polytopic_all))
+           + list(_invariance_all) + list(_polytopic_all) + list(_terminal_all))
