@@ -41,7 +41,7 @@ from ._cgen import _BINARY as _C_BINARY
 from ._cgen import _UNARY as _C_UNARY
 from ._cgen import PRELUDE, c_double
 
-__all__ = ["native_kernel", "native_available", "kernel_dir"]
+__all__ = ["native_kernel", "native_available", "kernel_dir", "wait_for_kernels"]
 
 _FLAGS = ("-O3", "-fno-fast-math", "-fno-trapping-math", "-ffp-contract=off", "-fopenmp-simd",
           "-fPIC", "-shared")
@@ -420,12 +420,55 @@ def _build(src: str, key: str) -> Path | None:
     return lib
 
 
+class _Pending:
+    """The answer of :func:`load_kernel` while the kernel compiles in the background."""
+
+    def __bool__(self) -> bool:
+        return False
+
+    def __repr__(self) -> str:
+        return "PENDING"
+
+
+PENDING: Any = _Pending()
+_building: dict[str, threading.Thread] = {}  # key -> background compilation
+_failed: set[str] = set()  # keys whose compilation failed in the background
+
+
+def _build_in_background(src: str, key: str) -> None:
+    """Compile ``src`` in a daemon thread (once per key); the next :func:`load_kernel`
+    finds the library in the disk cache."""
+    with _lock:
+        t = _building.get(key)
+        if t is not None and (t.is_alive() or (kernel_dir() / f"k{key}.so").is_file()):
+            return
+
+        def work() -> None:
+            if _build(src, key) is None:
+                with _lock:
+                    _failed.add(key)
+
+        t = _building[key] = threading.Thread(target=work, name=f"cmpc-cc-{key[:8]}",
+                                              daemon=True)
+    t.start()
+
+
+def wait_for_kernels(timeout: float | None = None) -> None:
+    """Wait until the kernels compiling in the background are built (or failed)."""
+    with _lock:
+        threads = list(_building.values())
+    for t in threads:
+        t.join(timeout)
+
+
 def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray],
-                  size_out: Sequence[int], keep_outputs: Sequence[int] | None = None
+                  size_out: Sequence[int], keep_outputs: Sequence[int] | None = None,
+                  wait: bool = True
                   ) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
     """``run(boxes, n) -> outputs``: the natural inclusion of ``fun`` by the fused C loop,
     on validated ``(N_i, d_i, 2)`` float64 inputs (N_i in {1, n}); None when no compiler is
-    found (one warning per process) or an operation has no C rule."""
+    found (one warning per process) or an operation has no C rule; :data:`PENDING` (falsy)
+    while it compiles in the background (``wait=False``, see :func:`load_kernel`)."""
     if not native_available():
         if not native_disabled():
             _warn_once("no C compiler found (set $CC, or install cc/gcc/clang): the "
@@ -435,21 +478,38 @@ def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray]
     src = kernel_source(fun, widen, out_pos, size_out, keep_outputs)
     if src is None:
         return None
-    return load_kernel(src, [int(fun.numel_in(i)) for i in range(fun.n_in())], size_out)
+    return load_kernel(src, [int(fun.numel_in(i)) for i in range(fun.n_in())], size_out,
+                       wait=wait)
 
 
-def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int]
+def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
+                wait: bool = True
                 ) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
     """``run(boxes, n)`` of a kernel source ``cmpc_batch`` (inputs ``(N_i, d_i, 2)``,
-    outputs ``(n, d_o, 2)``), compiled or loaded from the disk cache; None on failure."""
+    outputs ``(n, d_o, 2)``), loaded from the disk cache or compiled; None on failure.
+
+    ``wait=False``: a kernel that is not in the disk cache is compiled in a background
+    thread (a large function takes seconds to tens of seconds) and :data:`PENDING` is
+    returned until it is there; the caller evaluates with numpy meanwhile."""
     if not native_available():
         return None
     key = hashlib.sha256("\0".join([src, str(_compiler()), " ".join(_FLAGS), _ARCH,
                                      _cpu_id()]).encode()).hexdigest()[:24]
     with _lock:
         fn = _loaded.get(key)
+        failed = key in _failed
+        building = _building.get(key)
     if fn is None:
-        lib = _build(src, key)
+        if failed:
+            return None
+        lib = kernel_dir() / f"k{key}.so"
+        if not lib.is_file():
+            if not wait:
+                _build_in_background(src, key)
+                return PENDING
+            if building is not None:
+                building.join()
+            lib = _build(src, key)
         if lib is None:
             return None
         fn = ctypes.CDLL(str(lib)).cmpc_batch

@@ -1186,7 +1186,7 @@ class InclusionFunction:
         enclosures as extra outputs, used where the jump guard (evaluated as before) fires;
         or ``("g", (run, pos))``, the graph G alone; None: numpy."""
         if self._native is None:
-            from ._native import centered_source, load_kernel, native_kernel
+            from ._native import PENDING, centered_source, load_kernel, native_kernel
 
             g = self._g
             guarded = self._guard.active
@@ -1194,14 +1194,19 @@ class InclusionFunction:
                                   self.size_out, self._jac_rows_list, self._jac_cols_list,
                                   self._y_nz, with_natural=guarded)
             sizes = list(self.size_out) * (2 if guarded else 1)
-            run = load_kernel(src, self.size_in, sizes) if src else None
+            wait = self.backend == "native"  # auto: compile in the background, numpy meanwhile
+            run = load_kernel(src, self.size_in, sizes, wait=wait) if src else None
+            if run is PENDING:
+                return None
             if run is not None:
                 self._native = ("fused_guarded" if guarded else "fused", run)
             else:
                 pos = [np.asarray(g.sparsity_out(i).find(), dtype=np.intp)
                        for i in range(g.n_out())]
                 k = native_kernel(g, self._g_widen, pos,
-                                  [g.numel_out(i) for i in range(g.n_out())])
+                                  [g.numel_out(i) for i in range(g.n_out())], wait=wait)
+                if k is PENDING:
+                    return None
                 self._native = ("g", (k, pos)) if k is not None else False
         return self._native or None
 
@@ -1229,10 +1234,14 @@ class InclusionFunction:
 
     def _native_kernel(self) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
         if self._native is None:
-            from ._native import native_kernel
+            from ._native import PENDING, native_kernel
 
+            # auto: a kernel not yet in the disk cache compiles in the background (a large
+            # function takes seconds) and numpy evaluates meanwhile
             k = native_kernel(self.fun, self._cwiden, self._out_pos, self.size_out,
-                              self._keep)
+                              self._keep, wait=self.backend == "native")
+            if k is PENDING:
+                return None
             self._native = k if k is not None else False
         return self._native or None
 

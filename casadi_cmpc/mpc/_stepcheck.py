@@ -60,7 +60,9 @@ class NativeAfter:
         return native.evaluate_unchecked(boxes, n)
 
     def _native_copy(self) -> InclusionFunction:
-        """``F`` on the native backend (``F`` itself without a C compiler)."""
+        """A copy of ``F`` past the threshold of the automatic backend: the native kernel
+        from its next call, once compiled (in the background: numpy evaluates until then);
+        ``F`` itself without a C compiler."""
         from ..interval._native import native_available
 
         F = self.F
@@ -68,4 +70,6 @@ class NativeAfter:
             return F
         with warnings.catch_warnings():  # F has given its warnings already
             warnings.simplefilter("ignore", CmpcWarning)
-            return InclusionFunction(F.fun, F.kind, backend="native")
+            G = InclusionFunction(F.fun, F.kind, backend="auto")
+        G._native_batches = G.native_after
+        return G

@@ -141,6 +141,8 @@ def test_auto_moves_to_native_after_repeated_batches():
     for _ in range(F.native_after):
         F(X)
     assert F._native is None  # numpy so far
+    F(X)  # the kernel is loaded from the disk cache, or compiles in the background
+    nat.wait_for_kernels()
     out = F(X)[0]
     assert callable(F._native)
     ref = InclusionFunction(f, backend="numpy")(X)[0]
@@ -241,12 +243,35 @@ def test_a_large_function_called_box_by_box_moves_to_native():
     for _ in range(big.native_after + 1):
         a = big.evaluate_unchecked([box], 1)[0]
         small.evaluate_unchecked([box], 1)
+    nat.wait_for_kernels()  # a kernel not in the disk cache compiles in the background
+    a = big.evaluate_unchecked([box], 1)[0]
+    small.evaluate_unchecked([box], 1)
     assert callable(big._native) and small._native is None
     ref = InclusionFunction(ca.Function("big", [x], [e]), backend="numpy")(box)[0]
     assert np.all(a[..., 0] <= ref[..., 1]) and np.all(ref[..., 0] <= a[..., 1])
     pt = eval_function(ca.Function("big", [x], [e]), [list(box[0, :, 0])])[0]
     for j in range(2):
         assert inside(a[0, j, 0], a[0, j, 1], pt[j])
+
+
+def test_a_kernel_not_in_the_disk_cache_compiles_in_the_background(tmp_path, monkeypatch):
+    """With the automatic backend a first compilation does not hold the caller up: numpy
+    answers until the kernel is built, then the kernel does, with enclosures of the same
+    values."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # an empty kernel cache
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("bg", [x], [ca.vertcat(x[0] * x[1] + 0.25, ca.exp(x[0]) - x[1])])
+    F = InclusionFunction(f)
+    X = np.tile(np.array([[[0.1, 0.2], [1.0, 1.5]]]), (100, 1, 1))
+    for _ in range(F.native_after + 1):
+        first = F(X)[0]
+    assert F._native is None  # still compiling: numpy answered
+    nat.wait_for_kernels()
+    assert any(tmp_path.rglob("k*.so"))
+    out = F(X)[0]
+    assert callable(F._native)
+    lo, hi = np.maximum(out[..., 0], first[..., 0]), np.minimum(out[..., 1], first[..., 1])
+    assert np.all(lo <= hi)  # both enclose the same values
 
 
 def test_cmpc_native_0_turns_the_backend_off_without_a_warning(monkeypatch):
