@@ -139,10 +139,12 @@ def _save_atomically(seq: Any, path: Path) -> None:
 
 
 def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
-                         solver: str | None = None, checkpoint: str | None = None) -> Any:
+                         solver: str | None = None, checkpoint: str | None = None,
+                         executor: Any = None) -> Any:
     """The SetSequenceMPC of an example and its sequence, from the cache or computed (and
     then cached); ``solver`` overrides the example's (default ipopt); ``checkpoint``: the
-    file that makes the computation resumable (see :func:`controllable_sets`)."""
+    file that makes the computation resumable (see :func:`controllable_sets`); ``executor``:
+    where the large levels of the set computation run."""
     from .control.controllable import controllable_sets
     from .control.linear_sets import SetSequence
     from .mpc.sequence import SetSequenceMPC
@@ -167,7 +169,8 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
     if seq is None:
         t0 = time.perf_counter()
         seq = controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=cfg["robust"],
-                                law=ex.local_law, progress=progress, checkpoint=checkpoint)
+                                law=ex.local_law, progress=progress, checkpoint=checkpoint,
+                                executor=executor)
         if checkpoint is not None:
             print(f"checkpoint {checkpoint}: {seq.info.get('resumed_steps', 0)} of the "
                   f"{len(seq.steps)} steps read from it")
@@ -196,8 +199,8 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
 
 
 def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
-                progress: bool | None = None,
-                checkpoint: str | None = None) -> tuple[Any, Any]:
+                progress: bool | None = None, checkpoint: str | None = None,
+                executor: Any = None) -> tuple[Any, Any]:
     """The controller of an example and its set sequence (None for the contractive MPC)."""
     from .mpc.contractive import ContractiveMPC
 
@@ -205,7 +208,8 @@ def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
         raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
                          "--controller contractive")
     if kind in ("auto", "sequence") and "sequence" in ex.info:
-        return _sequence_controller(ex, cache, progress, checkpoint=checkpoint)
+        return _sequence_controller(ex, cache, progress, checkpoint=checkpoint,
+                                    executor=executor)
     return ContractiveMPC(ex.model, **ex.info["mpc"]), None
 
 
@@ -288,9 +292,42 @@ def _figures(ex: Any, trajs: list, run: dict, out: Path) -> list[str]:
     return written
 
 
+def _executor(workers: int | None, scheduler: str | None) -> Any:
+    """A context manager giving the executor of ``--workers`` / ``--scheduler`` (None for
+    neither)."""
+    import contextlib
+
+    if scheduler:
+        try:
+            import distributed
+        except ImportError:
+            raise ValueError("--scheduler needs dask's distributed: pip install "
+                             "'casadi_cmpc[dask]'") from None
+
+        @contextlib.contextmanager
+        def client() -> Any:
+            try:
+                c = distributed.Client(scheduler, timeout="20s")
+            except (OSError, TimeoutError) as exc:
+                raise ValueError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") \
+                    from None
+            with c:
+                print(f"set computations on the Dask cluster at {scheduler} "
+                      f"({len(c.scheduler_info().get('workers', {}))} workers)")
+                yield c.get_executor()
+
+        return client()
+    if workers:
+        from concurrent.futures import ProcessPoolExecutor
+
+        return ProcessPoolExecutor(workers)
+    return contextlib.nullcontext()
+
+
 def _run(name: str, out: str | None, steps: int | None, seed: int,
          progress: bool | None, controller: str = "auto", cache: str | None = None,
-         checkpoint: str | None = None) -> int:
+         checkpoint: str | None = None, workers: int | None = None,
+         scheduler: str | None = None) -> int:
     from . import models
     from .mpc.simulate import _summary_lines, simulate
 
@@ -313,7 +350,8 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
     print(model.summary())
     t_build = time.perf_counter()
     try:
-        ctrl, seq = _controller(ex, controller, cache, progress, checkpoint)
+        with _executor(workers, scheduler) as executor:
+            ctrl, seq = _controller(ex, controller, cache, progress, checkpoint, executor)
     except ValueError as exc:
         print(f"cmpc: {exc}", file=sys.stderr)
         return 2
@@ -672,6 +710,15 @@ def main(argv: list[str] | None = None) -> int:
                             "after each completed step; an interrupted or killed run given "
                             "the same PATH again resumes there (the cache, when it holds "
                             "the sets, still answers first)")
+    par = p_run.add_mutually_exclusive_group()
+    par.add_argument("--workers", type=int, default=None, metavar="N",
+                     help="compute the sets with N worker processes on this machine (the "
+                          "sets are those of a serial run; small levels stay in this "
+                          "process)")
+    par.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="compute the sets on a Dask cluster, e.g. tcp://host:8786 "
+                          "(workers with casadi_cmpc installed; pip install "
+                          "'casadi_cmpc[dask]')")
     p_exp = sub.add_parser("export", help="export the controller of an example to C")
     p_exp.add_argument("example", help="example name; see 'cmpc list'")
     p_exp.add_argument("--out", required=True, help="directory of the C sources (created)")
@@ -715,9 +762,11 @@ def _command(parser: Any, args: Any) -> int:
         return 0
     if args.steps is not None and args.steps < 1:
         parser.error("--steps must be at least 1")
+    if args.workers is not None and args.workers < 1:
+        parser.error("--workers must be at least 1")
     return _run(args.example, args.out, args.steps, args.seed,
                 False if args.no_progress else None, args.controller, args.cache,
-                args.checkpoint)
+                args.checkpoint, args.workers, args.scheduler)
 
 
 if __name__ == "__main__":  # pragma: no cover
