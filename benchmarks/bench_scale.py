@@ -1,0 +1,188 @@
+"""How set computations scale: with workers, with the state dimension and with 1/eps.
+
+Prints one JSON line, measured in one run:
+
+* ``workers``: the E9 robust controllable sequence at eps 0.025, serial against a
+  ``ProcessPoolExecutor(2)`` (target: speedup >= 1.7 on a 2-core machine) and against a Dask
+  ``LocalCluster`` of 2 worker processes (its overhead against the pool); the sets must be
+  identical.
+* ``growth``: ``one_step_set`` (nominal and robust) on a chain model of n = 2, 3, 4 states
+  (``x_i+ = x_i + 0.1 x_{i+1}``, the last state driven by ``u - 0.5 sin(x_0)`` and an
+  additive w), at several eps: seconds, pairs classified, peak traced memory (MB) and the
+  certified volume fraction of X; next to the naive grid at the same resolution (one cell per
+  eps-box of X, one transition per cell and control value on 17 values, the same centered
+  inclusion: what a SCOTS-style abstraction computes), its time, transitions and volume.
+  The grid runs while it is predicted to finish within ``GRID_LIMIT_S``.
+
+Options: ``--quick`` (coarser eps, n <= 3; a few minutes), ``--no-dask``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+import tracemalloc
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import casadi as ca  # noqa: E402
+
+import casadi_cmpc as cm  # noqa: E402
+from casadi_cmpc.interval import InclusionFunction  # noqa: E402
+
+GRID_LIMIT_S = 600.0
+N_U = 17  # control values of the grid
+
+
+def chain(n: int) -> cm.Model:
+    """The n-state chain: x_i+ = x_i + 0.1 x_{i+1}, x_{n-1}+ = x_{n-1} + 0.1 (u - 0.5 sin x_0)
+    + w, X = [-1, 1]^n, U = [-2, 2], W = [-0.005, 0.005]."""
+    x = ca.SX.sym("x", n)
+    u = ca.SX.sym("u")
+    w = ca.SX.sym("w")
+    f = [x[i] + 0.1 * x[i + 1] for i in range(n - 1)]
+    f.append(x[n - 1] + 0.1 * (u - 0.5 * ca.sin(x[0])) + w)
+    return cm.Model(x=x, u=u, w=w, f=ca.vertcat(*f), X=cm.Box([-1] * n, [1] * n),
+                    U=cm.Box([-2], [2]), W=cm.Box([-0.005], [0.005]), name=f"chain{n}")
+
+
+def target(n: int) -> cm.Polytope:
+    return cm.Polytope.from_box(cm.Box([-0.4] * n, [0.4] * n))
+
+
+def ours(m: cm.Model, eps: float, robust: bool) -> dict:
+    """Time (a second run: kernels compiled) and, in a third run, the peak memory traced by
+    tracemalloc (which slows Python down, so it is not timed)."""
+    run = lambda: cm.one_step_set(m, target(m.n), eps, robust=robust,  # noqa: E731
+                                  progress=False)
+    run()
+    t0 = time.perf_counter()
+    K = run()
+    dt = time.perf_counter() - t0
+    tracemalloc.start()
+    run()
+    peak = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    return {"s": dt, "pairs": int(K.n_pairs), "peak_mb": peak,
+            "volume_fraction": float(K.paving.volume()) / 2.0 ** m.n,
+            "status": str(K.status)}
+
+
+def grid(m: cm.Model, eps: float, robust: bool, budget_s: float) -> dict:
+    """The naive abstraction: a cell is proven when one of the N_U control values maps all
+    of it (and all of W, robust) into the target."""
+    n = m.n
+    k = int(round(2 / eps))
+    cells_n = k ** n
+    from casadi_cmpc.interval._native import native_available
+
+    F = InclusionFunction(m.function, "centered",
+                          backend="native" if native_available() else "auto")
+    W = (m.W.as_array()[None] if robust else np.zeros((1, 1, 2)))
+    T = target(n)
+    # time one batch first and predict
+    edges = np.linspace(-1, 1, k + 1)
+    idx = np.indices((k,) * n).reshape(n, -1).T
+    t0 = time.perf_counter()
+    probe = min(cells_n, 20000)
+    lo = edges[idx[:probe]]
+    F(np.stack([lo, lo + 2 / k], -1), np.array([[[0.0, 0.0]]]), W)
+    per = (time.perf_counter() - t0) / probe
+    predicted = per * cells_n * N_U * 0.6  # proven cells are skipped: about 60 % remain
+    if predicted > budget_s:
+        return {"skipped": f"predicted {predicted:.0f} s > {budget_s:.0f} s", "cells": cells_n}
+    t0 = time.perf_counter()
+    ok = np.zeros(cells_n, dtype=bool)
+    transitions = 0
+    for uv in np.linspace(-2, 2, N_U):
+        todo = np.flatnonzero(~ok)
+        for a in range(0, todo.size, 200_000):
+            part = todo[a:a + 200_000]
+            lo = edges[idx[part]]
+            Y = F(np.stack([lo, lo + 2 / k], -1), np.array([[[uv, uv]]]), W)[0]
+            transitions += part.size
+            ok[part] |= np.asarray(T.contains_box(Y), dtype=bool)
+    dt = time.perf_counter() - t0
+    return {"s": dt, "transitions": transitions, "cells": cells_n,
+            "volume_fraction": float(ok.sum()) / cells_n}
+
+
+def growth(quick: bool) -> list[dict]:
+    rows = []
+    dims = (2, 3) if quick else (2, 3, 4)
+    for n in dims:
+        m = chain(n)
+        eps_list = {2: (0.1, 0.05, 0.025), 3: (0.2, 0.1, 0.05), 4: (0.25, 0.2, 0.1)}[n]
+        if quick:
+            eps_list = eps_list[:2]
+        for eps in eps_list:
+            for robust in (False, True):
+                row = {"n": n, "eps": eps, "robust": robust, "ours": ours(m, eps, robust)}
+                row["grid"] = grid(m, eps, robust, GRID_LIMIT_S)
+                g = row["grid"]
+                if "s" in g:
+                    row["grid_s_over_ours"] = g["s"] / row["ours"]["s"]
+                rows.append(row)
+    return rows
+
+
+def _e9(executor=None) -> tuple[float, list]:
+    ex = cm.models.load("cannon_robust")
+    t0 = time.perf_counter()
+    seq = cm.controllable_sets(ex.model, ex.terminal, 0.025, robust=True, law=ex.local_law,
+                               progress=False, executor=executor)
+    return time.perf_counter() - t0, [s["boxes"] for s in seq.steps]
+
+
+def _same(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def workers(dask: bool) -> dict:
+    _e9()  # compile and load every kernel once
+    t_serial, ref = _e9()
+    with ProcessPoolExecutor(2) as pool:
+        _e9(pool)  # the workers' kernels
+        t_pool, got = _e9(pool)
+    same = _same(ref, got)
+    out = {"serial_s": t_serial, "pool2_s": t_pool, "speedup_pool2": t_serial / t_pool,
+           "identical_pool": bool(same), "target_speedup": ">= 1.7"}
+    if dask:
+        try:
+            import distributed
+        except ImportError:
+            out["dask"] = "not installed"
+            return out
+        with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      dashboard_address=None) as cluster, \
+                distributed.Client(cluster) as client:
+            ex = client.get_executor()
+            _e9(ex)
+            t_dask, got = _e9(ex)
+        out.update({"dask2_s": t_dask, "dask_over_pool": t_dask / t_pool,
+                    "identical_dask": _same(ref, got)})
+    return out
+
+
+def main() -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--only", choices=["workers", "growth"])
+    a = ap.parse_args()
+    res: dict = {"machine": platform.machine(), "cpus": os.cpu_count()}
+    if a.only in (None, "workers"):
+        res["workers"] = workers(not a.no_dask)
+    if a.only in (None, "growth"):
+        res["growth"] = growth(a.quick)
+    return res
+
+
+if __name__ == "__main__":
+    print(json.dumps(main()))
