@@ -16,6 +16,7 @@ import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 __all__ = ["InterruptScope", "solver_call"]
 
@@ -45,14 +46,19 @@ def solver_call() -> Iterator[None]:
     finally:
         sys.stderr = err
         signal.signal(signal.SIGINT, previous)
-        text = buf.getvalue()
-        if seen or sys.exc_info()[0] is KeyboardInterrupt:
-            text = "".join(line for line in text.splitlines(keepends=True)
-                           if "KeyboardInterrupt" not in line)
-        if text:
-            err.write(text)
+        pass_on_stderr(err, buf.getvalue(), seen or sys.exc_info()[0] is KeyboardInterrupt)
     if seen:
         raise KeyboardInterrupt
+
+
+def pass_on_stderr(err: Any, text: str, interrupted: bool) -> None:
+    """Write what a compiled call printed to ``err``, without CasADi's line about the
+    interruption when it was interrupted (the caller raises KeyboardInterrupt instead)."""
+    if interrupted:
+        text = "".join(line for line in text.splitlines(keepends=True)
+                       if "KeyboardInterrupt" not in line)
+    if text:
+        err.write(text)
 
 
 _scope = threading.local()

@@ -20,6 +20,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .._interrupt import pass_on_stderr
+
 __all__ = ["BufferedCall"]
 
 
@@ -103,12 +105,7 @@ class BufferedCall:
             interrupted = self._run()
         finally:
             sys.stderr = err
-        text = buf.getvalue()
-        if interrupted:
-            text = "".join(line for line in text.splitlines(keepends=True)
-                           if "KeyboardInterrupt" not in line)
-        if text:
-            err.write(text)
+        pass_on_stderr(err, buf.getvalue(), interrupted)
         if interrupted:
             raise KeyboardInterrupt
 
