@@ -16,7 +16,8 @@ which can change a label at a box within a few ulps of a decision.
 
 Chunk sizes follow the measured cost: about :data:`TARGET_S` seconds of work per task (a Dask
 task costs about 1 ms of overhead, a process-pool task less), from the cost per element of
-the previous level; levels with less work than two tasks run in the driver.
+the previous levels; a search's first levels, and every level with less work than two tasks,
+run in the driver.
 
 The classifier is serialised once (pickle, CasADi expressions in one shared context;
 closures need ``cloudpickle``, which the ``[dask]`` extra installs), sent with the first
@@ -119,6 +120,19 @@ def _workers(executor: Executor) -> int:
     return max(int(n or 2), 1)
 
 
+class _Failed:
+    """A task that could not be submitted: its ``result()`` raises the submission's error."""
+
+    def __init__(self, exc: BaseException) -> None:
+        self.exc = exc
+
+    def result(self) -> Any:
+        raise self.exc
+
+    def cancel(self) -> bool:
+        return False
+
+
 class LevelRunner:
     """``runner(classify, frontier) -> labels``: one level classified serially or on an
     executor (see the module notes).
@@ -146,8 +160,10 @@ class LevelRunner:
 
     def __call__(self, classify: Any, frontier: Any) -> np.ndarray:
         N = len(frontier)
-        if self.executor is None or N < 2 * MIN_CHUNK or (
-                self.cost is not None and N * self.cost < 2 * self.target_s):
+        # a level runs here until the cost per element is known (measured on this level)
+        # and predicts at least two tasks' worth of work
+        if self.executor is None or N < 2 * MIN_CHUNK or self.cost is None \
+                or N * self.cost < 2 * self.target_s:
             t0 = time.perf_counter()
             if _two_phase(classify):
                 labels = classify.combine(frontier, [classify.map(frontier)])
@@ -170,23 +186,23 @@ class LevelRunner:
 
     def _parallel(self, classify: Any, frontier: Any, N: int) -> np.ndarray:
         blob, key = self._serialised(classify)
-        if self.cost is None:
-            size = -(-N // (2 * self.n_workers))
-        else:
-            size = int(self.target_s / max(self.cost, 1e-9))
-            size = min(size, -(-N // self.n_workers))  # every worker gets a share
+        size = int(self.target_s / max(float(self.cost or 0.0), 1e-9))
+        size = min(size, -(-N // self.n_workers))  # every worker gets a share
         size = max(size, MIN_CHUNK)
         bounds = [(a, min(a + size, N)) for a in range(0, N, size)]
         chunks = [frontier.take(np.arange(a, b)) for a, b in bounds]
-        futures = []
+        futures: list[Any] = []
         for c in chunks:
             # the classifier's bytes go with the first tasks only (each worker keeps it);
             # a worker that never got them answers _MISSING and the chunk goes again
             shipped = self._shipped.get(key, 0)
             ship = shipped < 2 * self.n_workers
             self._shipped[key] = shipped + ship
-            futures.append(self.executor.submit(_classify_chunk, blob if ship else None, key,
-                                                c))
+            try:
+                futures.append(self.executor.submit(_classify_chunk, blob if ship else None,
+                                                    key, c))
+            except BrokenProcessPool as exc:  # a worker died since: the rest runs here
+                futures.append(_Failed(exc))
         self.n_tasks += len(futures)
         two = _two_phase(classify)
         labels = np.empty(N, dtype=np.int8)

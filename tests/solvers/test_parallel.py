@@ -236,3 +236,31 @@ def test_e9_robust_sequence_is_the_same_serial_on_a_pool_and_on_dask(pool, monke
         assert all(np.array_equal(a, b) for a, b in zip(boxes, ref[0], strict=True))
         assert all(np.array_equal(a, b, equal_nan=True)
                    for a, b in zip(wit, ref[1], strict=True))
+
+
+class _BreaksAtSubmit(Executor):
+    """A pool that breaks after its first task: later submissions raise BrokenProcessPool
+    (as a ProcessPoolExecutor does once a worker has died)."""
+
+    def __init__(self, inner: Executor) -> None:
+        self.inner, self.n, self._max_workers = inner, 0, 2
+
+    def submit(self, fn, /, *args, **kwargs):
+        from concurrent.futures.process import BrokenProcessPool
+
+        self.n += 1
+        if self.n > 1:
+            raise BrokenProcessPool("a worker died")
+        return self.inner.submit(fn, *args, **kwargs)
+
+
+def test_a_pool_broken_between_submissions_loses_no_box(process_pool):
+    fr = BoxFrontier.from_boxes(np.array([[[0.0, 1.0], [0.0, 1.0]]]))
+    ref = branch_and_bound(fr, _Halves(False), 0.01, progress=False)
+    ex = _BreaksAtSubmit(process_pool)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        got = branch_and_bound(fr, _Halves(False), 0.01, progress=False, executor=ex)
+    assert ex.n > 1 and any("worker process died" in str(r.message) for r in rec)
+    for k in ("inner", "boundary", "outer"):
+        assert np.array_equal(getattr(ref, k).boxes, getattr(got, k).boxes)
