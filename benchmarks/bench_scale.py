@@ -14,7 +14,9 @@ Prints one JSON line, measured in one run:
   inclusion: what a SCOTS-style abstraction computes), its time, transitions and volume.
   The grid runs while it is predicted to finish within ``GRID_LIMIT_S``.
 
-Options: ``--quick`` (coarser eps, n <= 3; a few minutes), ``--no-dask``.
+Options: ``--quick`` (coarser eps, n <= 3), ``--no-dask``, ``--only workers|growth``,
+``--plot PNG`` (the growth as a log-log figure: seconds and certified volume against 1/eps,
+ours and the grid, one colour per n).
 """
 
 from __future__ import annotations
@@ -170,17 +172,51 @@ def workers(dask: bool) -> dict:
     return out
 
 
+def plot(rows: list[dict], path: str) -> None:
+    """Log-log figure of the growth rows (robust runs): time and certified volume fraction
+    against 1/eps, ours (solid, circles) and the grid (dashed, squares), one colour per n."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for n, colour in zip((2, 3, 4), ("tab:blue", "tab:orange", "tab:green"), strict=True):
+        rs = [r for r in rows if r["n"] == n and r["robust"]]
+        if not rs:
+            continue
+        inv = [1 / r["eps"] for r in rs]
+        a1.loglog(inv, [r["ours"]["s"] for r in rs], "o-", color=colour,
+                  label=f"n = {n}, branch and bound")
+        a2.semilogx(inv, [100 * r["ours"]["volume_fraction"] for r in rs], "o-", color=colour,
+                    label=f"n = {n}, branch and bound")
+        g = [(1 / r["eps"], r["grid"]) for r in rs if "s" in r["grid"]]
+        a1.loglog([x for x, _ in g], [y["s"] for _, y in g], "s--", color=colour,
+                  label=f"n = {n}, grid abstraction")
+        a2.semilogx([x for x, _ in g], [100 * y["volume_fraction"] for _, y in g], "s--",
+                    color=colour, label=f"n = {n}, grid abstraction")
+    a1.set_xlabel("1 / eps")
+    a1.set_ylabel("time of the robust one-step set (s)")
+    a2.set_xlabel("1 / eps")
+    a2.set_ylabel("certified volume (% of X)")
+    a2.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8)
+    fig.savefig(path, dpi=110)
+
+
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--only", choices=["workers", "growth"])
+    ap.add_argument("--plot", default=None, metavar="PNG")
     a = ap.parse_args()
     res: dict = {"machine": platform.machine(), "cpus": os.cpu_count()}
     if a.only in (None, "workers"):
         res["workers"] = workers(not a.no_dask)
     if a.only in (None, "growth"):
         res["growth"] = growth(a.quick)
+        if a.plot:
+            plot(res["growth"], a.plot)
     return res
 
 
