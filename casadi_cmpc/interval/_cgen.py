@@ -282,17 +282,35 @@ CIV_INLINE double civ_nz(civ b, double v) {
     return civ_max(b.lo, -b.hi) > 0.0 ? v : NAN; /* b.lo > 0 or b.hi < 0 */
 }
 
+/* A rounded sum or difference v moved outward by |v| 2^-52 (civ_dns, civ_ups): a sum whose
+ * exact value is subnormal or zero is exact (no absolute step needed); otherwise as civ_dn.
+ * These are the rules of the Python backends, bit for bit. */
+CIV_INLINE double civ_dns(double v) {
+    v = v > DBL_MAX ? DBL_MAX : v;
+    return v - fabs(v) * 0x1p-52;
+}
+
+CIV_INLINE double civ_ups(double v) {
+    v = v < -DBL_MAX ? -DBL_MAX : v;
+    return v + fabs(v) * 0x1p-52;
+}
+
 /* ---- arithmetic */
 CIV_INLINE civ civ_add(civ a, civ b) {
-    return civ_make(civ_dn(a.lo + b.lo), civ_up(a.hi + b.hi));
+    return civ_make(civ_dns(a.lo + b.lo), civ_ups(a.hi + b.hi));
 }
 
 CIV_INLINE civ civ_sub(civ a, civ b) {
-    return civ_make(civ_dn(a.lo - b.hi), civ_up(a.hi - b.lo));
+    return civ_make(civ_dns(a.lo - b.hi), civ_ups(a.hi - b.lo));
 }
 
 CIV_INLINE civ civ_neg(civ a) { return civ_make(-a.hi, -a.lo); }
-CIV_INLINE civ civ_twice(civ a) { return civ_add(a, a); }
+
+/* 2 a: exact, except an overflowed lower bound (a real above the largest float) */
+CIV_INLINE civ civ_twice(civ a) {
+    double lo = a.lo + a.lo, hi = a.hi + a.hi;
+    return civ_make(lo > DBL_MAX ? DBL_MAX : lo, hi < -DBL_MAX ? -DBL_MAX : hi);
+}
 
 /* a * b: NaN when a product is NaN (0 times an infinite bound) */
 CIV_INLINE civ civ_mul(civ a, civ b) {
@@ -336,9 +354,14 @@ CIV_INLINE civ civ_fabs(civ a) {
     return civ_make(civ_max(civ_max(a.lo, -a.hi), 0.0), civ_maxn(-a.lo, a.hi));
 }
 
+/* a^2 from the distances of a from 0: both products are of non-negative numbers, so
+ * p (1 - 2^-51) - 2^-1074 rounded is below the exact p and p (1 + 2^-51) + 2^-1074 above
+ * it (one rounding of a normal result, and underflow); an overflowed lower bound is only
+ * known to be huge (the largest float) */
 CIV_INLINE civ civ_sq(civ a) {
-    civ m = civ_fabs(a);
-    return civ_make(civ_max(civ_dn(m.lo * m.lo), 0.0), civ_up(m.hi * m.hi));
+    double mig = civ_maxn(civ_maxn(a.lo, -a.hi), 0.0), mag = civ_maxn(-a.lo, a.hi);
+    double lo = civ_minn(civ_maxn(mig * mig * (1.0 - 0x1p-51) - CIV_TINY, 0.0), DBL_MAX);
+    return civ_make(lo, mag * mag * (1.0 + 0x1p-51) + CIV_TINY);
 }
 
 CIV_INLINE civ civ_sqrt(civ a) {

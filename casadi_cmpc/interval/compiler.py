@@ -505,7 +505,9 @@ class InclusionFunction:
     ``backend="auto"`` (default) evaluates batches of ``1 <= N <= scalar_max_batch`` boxes
     (``scalar_max_batch_centered`` for the centered form) with the scalar evaluator and
     larger ones with numpy, the natural form with the native kernel once the function has
-    evaluated :attr:`native_after` batches; ``"numpy"``, ``"scalar"`` and ``"native"``
+    evaluated :attr:`native_after` batches (its compilation starts in the background after
+    :attr:`native_prefetch` batches, and the switch waits for it: the batch at which the
+    backend changes does not depend on timings); ``"numpy"``, ``"scalar"`` and ``"native"``
     force one (an empty batch always goes to numpy). The centered form's scalar evaluation runs
     its Jacobian graph on floats and combines the mean-value terms in Python exactly as
     :meth:`_centered_impl` does (its jump guard encloses the guard expressions with scalar code
@@ -519,6 +521,7 @@ class InclusionFunction:
     scalar_max_batch: int = 32
     scalar_max_batch_centered: int = 16
     native_after: int = 16
+    native_prefetch: int = 4
     native_large: int = 200
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
@@ -1178,9 +1181,24 @@ class InclusionFunction:
         if self.backend != "auto" or self._native is False:
             return False
         self._native_batches += 1
+        if self._native_batches == self.native_prefetch and self._native is None:
+            self._prefetch_native()
         return self._native_batches > self.native_after
 
-    def _centered_native(self) -> tuple[str, Any] | None:
+    def _prefetch_native(self) -> None:
+        """Start compiling this function's native kernel in the background (when it is not
+        in the disk cache), so that the switch after :attr:`native_after` batches, which
+        waits for it, rarely waits long. The switch itself stays at that batch: the
+        results do not depend on how long a compilation took."""
+        try:
+            if self._natural_form():
+                self._native_kernel(wait=False)
+            else:
+                self._centered_native(wait=False)
+        except Exception:  # noqa: BLE001 - the switch compiles again and reports errors
+            self._native = None
+
+    def _centered_native(self, wait: bool = True) -> tuple[str, Any] | None:
         """The native centered form: ``("fused", run)``, one C loop doing all of
         :meth:`_centered_impl`; ``("fused_guarded", run)``, the same with the natural
         enclosures as extra outputs, used where the jump guard (evaluated as before) fires;
@@ -1194,7 +1212,6 @@ class InclusionFunction:
                                   self.size_out, self._jac_rows_list, self._jac_cols_list,
                                   self._y_nz, with_natural=guarded)
             sizes = list(self.size_out) * (2 if guarded else 1)
-            wait = self.backend == "native"  # auto: compile in the background, numpy meanwhile
             run = load_kernel(src, self.size_in, sizes, wait=wait) if src else None
             if run is PENDING:
                 return None
@@ -1232,14 +1249,15 @@ class InclusionFunction:
         outs = run(ins, n)
         return [[(a[:, p, 0], a[:, p, 1]) for p in ps] for a, ps in zip(outs, pos, strict=True)]
 
-    def _native_kernel(self) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
+    def _native_kernel(self, wait: bool = True
+                       ) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
+        """The natural form's kernel; ``wait=False``: start its compilation in the
+        background and answer None until it is built."""
         if self._native is None:
             from ._native import PENDING, native_kernel
 
-            # auto: a kernel not yet in the disk cache compiles in the background (a large
-            # function takes seconds) and numpy evaluates meanwhile
             k = native_kernel(self.fun, self._cwiden, self._out_pos, self.size_out,
-                              self._keep, wait=self.backend == "native")
+                              self._keep, wait=wait)
             if k is PENDING:
                 return None
             self._native = k if k is not None else False

@@ -61,7 +61,7 @@ class NativeAfter:
 
     def _native_copy(self) -> InclusionFunction:
         """A copy of ``F`` past the threshold of the automatic backend: the native kernel
-        from its next call, once compiled (in the background: numpy evaluates until then);
+        from its next call (``F``'s own calls started compiling it in the background);
         ``F`` itself without a C compiler."""
         from ..interval._native import native_available
 

@@ -188,7 +188,8 @@ def test_rounding_at_overflow_and_subnormals(tmp_path):
         ex = mp_eval(fun, p)
         for j in range(3):
             assert mpmath.mpf(float(lo[j])) <= ex[j] <= mpmath.mpf(float(hi[j])), (a, b, j)
-            assert lo[j] < hi[j]
+            # thin only where the result is exact (a sum that is zero or subnormal)
+            assert lo[j] < hi[j] or mpmath.mpf(float(lo[j])) == ex[j], (a, b, j)
 
 
 def test_unsupported_operations_are_named():
