@@ -41,7 +41,7 @@ from ._cgen import _BINARY as _C_BINARY
 from ._cgen import _UNARY as _C_UNARY
 from ._cgen import PRELUDE, c_double
 
-__all__ = ["native_kernel", "native_available", "kernel_dir", "wait_for_kernels"]
+__all__ = ["native_kernel", "native_available", "kernel_dir"]
 
 _FLAGS = ("-O3", "-fno-fast-math", "-fno-trapping-math", "-ffp-contract=off", "-fopenmp-simd",
           "-fPIC", "-shared")
@@ -329,7 +329,7 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
                       f"          M{i}_{j} = M{i}_{j} < lo ? lo : M{i}_{j};",
                       f"          M{i}_{j} = M{i}_{j} > hi ? hi : M{i}_{j};",
                       f"          r = civ_max(M{i}_{j} - lo, hi - M{i}_{j});",
-                      f"          D{c} = civ_up_(r); }}"]
+                      f"          D{c} = civ_ups(r); }}"]
             rad.append(f"D{c}")
             c += 1
     lines += gen.lines
@@ -353,22 +353,15 @@ def centered_source(g: Any, widen: frozenset[int], size_in: Sequence[int],
             for t in terms:
                 lines.append(f"          S += civ_term(R{k}_{t}, {rad[int(jac_cols[t])]});")
             lines += [f"          S = S * {scale} + {tiny};",
-                      f"          lo = civ_dn_({fm}.lo - S); hi = civ_up_({fm}.hi + S);",
+                      f"          lo = civ_dns({fm}.lo - S); hi = civ_ups({fm}.hi + S);",
                       f"          CIV_PUT(Q{i}, {2 * pos}, civ_mv(lo, hi, {fm}, {fb})); }}"]
     return _HEADER + _CENTERED_HELPERS + _block_loop(
         [int(d) for d in size_in], size_out, lines, 1 if with_natural else 0)
 
 
 _CENTERED_HELPERS = r"""
-/* the array rules of the numpy mean-value combination, element by element */
-CIV_INLINE double civ_dn_(double x) {
-    x = x > DBL_MAX ? DBL_MAX : x;
-    return x - fabs(x) * 0x1p-52;
-}
-CIV_INLINE double civ_up_(double x) {
-    x = x < -DBL_MAX ? -DBL_MAX : x;
-    return x + fabs(x) * 0x1p-52;
-}
+/* the array rules of the numpy mean-value combination, element by element (sums and
+ * differences rounded by civ_dns / civ_ups of the prelude) */
 
 /* mag(J) * rad: a coordinate that does not vary contributes nothing, a NaN slope is +inf */
 CIV_INLINE double civ_term(civ J, double r) {
@@ -451,14 +444,6 @@ def _build_in_background(src: str, key: str) -> None:
         t = _building[key] = threading.Thread(target=work, name=f"cmpc-cc-{key[:8]}",
                                               daemon=True)
     t.start()
-
-
-def wait_for_kernels(timeout: float | None = None) -> None:
-    """Wait until the kernels compiling in the background are built (or failed)."""
-    with _lock:
-        threads = list(_building.values())
-    for t in threads:
-        t.join(timeout)
 
 
 def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray],
