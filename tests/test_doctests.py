@@ -17,6 +17,8 @@ MODULES = [
     "casadi_cmpc.sets.paving",
     "casadi_cmpc.sets._boxes",
     "casadi_cmpc.sets.zonotope",
+    "casadi_cmpc.sets._reach",
+    "casadi_cmpc.control.quasi",
     "casadi_cmpc.solvers.sivia",
     "casadi_cmpc.solvers.minimize",
     "casadi_cmpc.solvers.quantified",

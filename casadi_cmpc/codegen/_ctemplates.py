@@ -105,6 +105,18 @@ static int solver_ready(void) {
 }
 """
 
+_ROW_UPPER = r"""
+/* An upper bound of a.y over the box [lo, hi] (NX entries), each product and sum rounded
+ * upward: a.y <= row_upper(a, lo, hi) for every real y in the box. */
+static double row_upper(const double *a, const double *lo, const double *hi) {
+    double s = 0.0;
+    int i;
+    for (i = 0; i < NX; ++i)
+        if (a[i] != 0.0) s = civ_up(s + civ_up(a[i] * (a[i] > 0.0 ? hi[i] : lo[i])));
+    return s;
+}
+"""
+
 _SEQUENCE = r"""
 #define NZ (NU + 1)
 #define NP (NX + CMPC_R * NX + CMPC_R + 1)
@@ -204,16 +216,7 @@ int cmpc_level(const double *x) {
 }
 
 /* ---------------------------------------------------------------- successor check */
-/* An upper bound of a.y over the box [lo, hi] (NX entries), each product and sum rounded
- * upward: a.y <= row_upper(a, lo, hi) for every real y in the box. */
-static double row_upper(const double *a, const double *lo, const double *hi) {
-    double s = 0.0;
-    int i;
-    for (i = 0; i < NX; ++i)
-        if (a[i] != 0.0) s = civ_up(s + civ_up(a[i] * (a[i] > 0.0 ? hi[i] : lo[i])));
-    return s;
-}
-
+""" + _ROW_UPPER + r"""
 /* every image box [lo[v], hi[v]] inside the polytope {y : A y <= b} */
 static int images_in_poly(const double *A, const double *b, int rows, double lo[][NX],
                           double hi[][NX]) {
@@ -387,6 +390,205 @@ int cmpc_step(const double *x, double *u) {
     return lvl | flags | CMPC_FLAG_BLEND;
 }
 """
+_QUASI = r"""
+#define NS CMPC_STEPS
+#define NZ (NS * NU)
+#define NP (NX + CMPC_R * NX + CMPC_R)
+
+WORK(cmpc_solver)
+#if CMPC_HAS_LAW
+WORK(cmpc_law)
+#endif
+""" + _ROW_UPPER + r"""
+/* the plan in progress: the controls still to apply, the level it started at and its
+ * target level; stored = 1 when it is the stored sequence of a box (proven offline) */
+static double plan_rest[NZ + 1];
+static int plan_n = 0, plan_level = -1, plan_target = -1, plan_stored = 0;
+
+void cmpc_reset(void) { plan_n = 0; plan_stored = 0; }
+
+static int in_poly(int k, const double *x) {
+    int r;
+    for (r = cmpc_poly_off[k]; r < cmpc_poly_off[k + 1]; ++r)
+        if (!row_le(cmpc_poly_A + r * NX, cmpc_poly_b[r], x)) return 0;
+    return 1;
+}
+
+/* first stored box of level m (1..M) holding x (-1: none) */
+static long box_of_level(int m, const double *x) {
+    long k;
+    int d;
+    for (k = cmpc_box_off[m - 1]; k < cmpc_box_off[m]; ++k) {
+        for (d = 0; d < NX; ++d)
+            if (!(x[d] >= cmpc_box_lo[k * NX + d] && x[d] <= cmpc_box_hi[k * NX + d])) break;
+        if (d == NX) return k;
+    }
+    return -1;
+}
+
+/* smallest m with x in P_m or in a stored box of level m (-1: none) */
+static int find_level(const double *x) {
+    int m;
+    for (m = 0; m < CMPC_NSETS; ++m) {
+        if (in_poly(m, x)) return m;
+        if (m >= 1 && box_of_level(m, x) >= 0) return m;
+    }
+    return -1;
+}
+
+int cmpc_level(const double *x) {
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    return find_level(x);
+}
+
+/* Interval evolution of the point x under useq (L controls, in U): X(k+1) = f(X(k), u(k),
+ * W) by the outward-rounded natural inclusion (cmpc_f_iv) over the box X(k) and the box W.
+ * Returns the first a in 1..L with X(a) inside P_j (every row bounded above by row_upper),
+ * the boxes X(1..a-1) inside the box X; 0 when not proven. Exact real arithmetic holds in
+ * the claim: every trajectory from x under useq and any w(k) in W obeys it. */
+static int prove(const double *x, const double *useq, int L, int j) {
+    double lo[NX], hi[NX], nl[NX], nh[NX];
+    const double *il[3], *ih[3];
+    double *ol[1], *oh[1];
+    int k, i, r;
+    for (k = 0; k < L * NU; ++k)
+        if (!(useq[k] >= cmpc_u_lo[k % NU] && useq[k] <= cmpc_u_hi[k % NU])) return 0;
+    for (i = 0; i < NX; ++i) lo[i] = hi[i] = x[i];
+    for (k = 0; k < L; ++k) {
+        int in = 1;
+        if (k > 0)
+            for (i = 0; i < NX; ++i)
+                if (!(lo[i] >= cmpc_x_lo[i] && hi[i] <= cmpc_x_hi[i])) return 0;
+        il[0] = lo; ih[0] = hi;
+        il[1] = useq + k * NU; ih[1] = useq + k * NU;
+        il[2] = NW > 0 ? cmpc_w_lo : cmpc_no_w; ih[2] = NW > 0 ? cmpc_w_hi : cmpc_no_w;
+        ol[0] = nl; oh[0] = nh;
+        cmpc_f_iv(il, ih, ol, oh);
+        if (!all_finite(nl, NX) || !all_finite(nh, NX)) return 0;
+        for (r = cmpc_poly_off[j]; r < cmpc_poly_off[j + 1] && in; ++r)
+            if (!(row_upper(cmpc_poly_A + r * NX, nl, nh) <= cmpc_poly_b[r])) in = 0;
+        if (in) return k + 1;
+        for (i = 0; i < NX; ++i) { lo[i] = nl[i]; hi[i] = nh[i]; }
+    }
+    return 0;
+}
+
+static void start_plan(const double *useq, int a, int level, int target, int stored,
+                       double *u) {
+    int i;
+    for (i = 0; i < NU; ++i) u[i] = useq[i];
+    for (i = 0; i < (a - 1) * NU; ++i) plan_rest[i] = useq[NU + i];
+    plan_n = a - 1;
+    plan_level = level;
+    plan_target = target;
+    plan_stored = stored;
+}
+
+int cmpc_step(const double *x, double *u) {
+    int i, k, lvl, j, a, flag, have_opt = 0, flags = 0;
+    long bx;
+    static double z0[NZ], p[NP], zs[NZ], fval, lam_x0[NZ], lam_g0[CMPC_NG + 1], cand[NZ];
+    static const double ts[3] = {0.75, 0.5, 0.25};
+    int in_T;
+    for (i = 0; i < NU; ++i) u[i] = NAN;
+    if (!all_finite(x, NX)) return CMPC_BAD_INPUT;
+    in_T = in_poly(0, x);
+#if CMPC_HAS_LAW
+    if (in_T) {
+        double ul[NU];
+        cmpc_law_arg[0] = x;
+        cmpc_law_res[0] = ul;
+        cmpc_law(cmpc_law_arg, cmpc_law_res, cmpc_law_iw, cmpc_law_w, 0);
+        if (prove(x, ul, 1, 0)) {
+            plan_n = 0;
+            for (i = 0; i < NU; ++i) u[i] = ul[i];
+            return 0;
+        }
+    }
+#endif
+    /* a plan in progress: proven again from the measured state */
+    if (plan_n > 0) {
+        a = prove(x, plan_rest, plan_n, plan_target);
+        if (a || plan_stored) {
+            int n = a ? a : plan_n;
+            for (i = 0; i < NU; ++i) u[i] = plan_rest[i];
+            for (i = 0; i < (n - 1) * NU; ++i) plan_rest[i] = plan_rest[NU + i];
+            plan_n = n - 1;
+            return plan_level | CMPC_FLAG_FALLBACK | (a ? 0 : CMPC_FLAG_WITNESS);
+        }
+    }
+    plan_n = 0;
+    if (in_T) {
+#if CMPC_HAS_LAW
+        cmpc_law_arg[0] = x;
+        cmpc_law_res[0] = u;
+        cmpc_law(cmpc_law_arg, cmpc_law_res, cmpc_law_iw, cmpc_law_w, 0);
+        return 0 | CMPC_FLAG_UNVERIFIED;
+#else
+        for (i = 0; i < NU; ++i) u[i] = 0.5 * (cmpc_u_lo[i] + cmpc_u_hi[i]);
+        return 0 | CMPC_FLAG_UNVERIFIED;
+#endif
+    }
+    lvl = find_level(x);
+    if (lvl < 0) return CMPC_NOT_CONTROLLABLE;
+    j = lvl - 1;
+    bx = box_of_level(lvl, x);
+    if (!solver_ready()) return CMPC_INTERNAL_ERROR;
+    /* (6.22)-(6.23) into P_j, started from the stored sequence when it is complete */
+    for (i = 0; i < NZ; ++i) {
+        double v = bx >= 0 ? cmpc_box_u[bx * NZ + i] : NAN;
+        z0[i] = v == v ? v : 0.5 * (cmpc_u_lo[i % NU] + cmpc_u_hi[i % NU]);
+        lam_x0[i] = 0.0;
+    }
+    for (i = 0; i < CMPC_NG; ++i) lam_g0[i] = 0.0;
+    for (i = 0; i < NX; ++i) p[i] = x[i];
+    for (i = 0; i < CMPC_R * NX; ++i) p[NX + i] = cmpc_nlp_H[j * CMPC_R * NX + i];
+    for (i = 0; i < CMPC_R; ++i) p[NX + CMPC_R * NX + i] = cmpc_nlp_h[j * CMPC_R + i];
+    cmpc_solver_arg[0] = z0; cmpc_solver_arg[1] = p;
+    cmpc_solver_arg[2] = cmpc_lbx; cmpc_solver_arg[3] = cmpc_ubx;
+    cmpc_solver_arg[4] = cmpc_lbg; cmpc_solver_arg[5] = cmpc_ubg;
+    cmpc_solver_arg[6] = lam_x0; cmpc_solver_arg[7] = lam_g0;
+    cmpc_solver_res[0] = zs; cmpc_solver_res[1] = &fval;
+    for (i = 2; i < 6; ++i) cmpc_solver_res[i] = 0;
+    PROFILE_BEGIN();
+    flag = cmpc_solver(cmpc_solver_arg, cmpc_solver_res, cmpc_solver_iw, cmpc_solver_w,
+                       solver_mem);
+    PROFILE_END();
+    if (all_finite(zs, NZ)) {
+        for (i = 0; i < NZ; ++i) {
+            double v = zs[i];
+            if (v < cmpc_u_lo[i % NU]) v = cmpc_u_lo[i % NU];
+            if (v > cmpc_u_hi[i % NU]) v = cmpc_u_hi[i % NU];
+            zs[i] = v;
+        }
+        have_opt = 1;
+    }
+    if (flag != 0 || !have_opt) flags |= CMPC_FLAG_SOLVER_FAILED;
+    if (have_opt && (a = prove(x, zs, NS, j))) {
+        start_plan(zs, a, lvl, j, 0, u);
+        return lvl | flags;
+    }
+    if (bx >= 0) {
+        const double *us = cmpc_box_u + bx * NZ;
+        int L = cmpc_box_arrival[bx];
+        if (have_opt)
+            for (k = 0; k < 3; ++k) {
+                for (i = 0; i < L * NU; ++i) cand[i] = us[i] + ts[k] * (zs[i] - us[i]);
+                if ((a = prove(x, cand, L, j))) {
+                    start_plan(cand, a, lvl, j, 0, u);
+                    return lvl | flags | CMPC_FLAG_BLEND;
+                }
+            }
+        a = prove(x, us, L, j);
+        /* not proven here: the stored sequence is proven offline for the whole box */
+        start_plan(us, a ? a : L, lvl, j, a ? 0 : 1, u);
+        return lvl | flags | CMPC_FLAG_WITNESS;
+    }
+    for (i = 0; i < NU; ++i) u[i] = have_opt ? zs[i] : 0.5 * (cmpc_u_lo[i] + cmpc_u_hi[i]);
+    return lvl | flags | CMPC_FLAG_UNVERIFIED;
+}
+"""
+
 
 _CONTRACTIVE = r"""
 #define NZ CMPC_NZ
@@ -554,6 +756,18 @@ _SEQUENCE_CHECK = (
     "images of W, convex hulls of the vertex images for a model affine in w, must lie in a "
     "polytope of the sequence (row sums rounded upward) or their interval hull in the boxes "
     "of steps 1..i-1. With CMPC_FLAG_UNVERIFIED nothing is claimed about the applied control.")
+_QUASI_CHECK = (
+    "A level i >= 1 without CMPC_FLAG_UNVERIFIED or CMPC_FLAG_WITNESS is proved: u is the "
+    "first control of a sequence (in U) under which every state stays in X and enters "
+    "P_{i-1} within CMPC_STEPS steps, for every disturbance sequence in W, in exact real "
+    "arithmetic (interval evolution by the outward-rounded natural inclusion generated from "
+    "the model's expression graph, rows of P_{i-1} bounded upward). CMPC_FLAG_FALLBACK: the "
+    "next control of the plan in progress, proven again from x. CMPC_FLAG_WITNESS: the "
+    "stored sequence of the box that held the state where the plan began, proven offline "
+    "(zonotope evolution) for every state of that box and every w in W, so valid when the "
+    "states since then came from the model with w in W (cmpc_reset() drops the plan). "
+    "Level 0 without flags: the local law, its step proven to stay in T = P_0; with "
+    "CMPC_FLAG_UNVERIFIED nothing is claimed.")
 _CONTRACTIVE_CHECK = (
     "A code 1 without CMPC_FLAG_UNVERIFIED is proved for the nominal model: the applied move "
     "is the first of a sequence whose predicted states, path and terminal rows and "
@@ -573,15 +787,20 @@ def header(model: Any, kind: str, solver: str, sizes: dict) -> str:
         INTERNAL_ERROR,
         NOT_CONTROLLABLE,
     )
-    what = ("one-step MPC along a sequence of controllable sets" if kind == "set_sequence"
-            else f"contractive MPC, horizon {sizes.get('horizon')}")
-    levels = ("the level i of x: 0 = x in the terminal set (local law applied), i >= 1 = "
-              "x in K_i \\ K_{i-1} (one-step problem into K_{i-1})" if kind == "set_sequence"
-              else "0 = local law (or x at the reference), 1 = the MPC problem was solved")
+    what = {"set_sequence": "one-step MPC along a sequence of controllable sets",
+            "quasi": f"MPC along quasi {sizes.get('steps')}-step robust controllable sets "
+                     "(Alg 6.8)"}.get(kind, f"contractive MPC, horizon {sizes.get('horizon')}")
+    levels = {"set_sequence": "the level i of x: 0 = x in the terminal set (local law "
+                              "applied), i >= 1 = x in K_i \\ K_{i-1} (one-step problem into "
+                              "K_{i-1})",
+              "quasi": "the level i of the plan: 0 = x in T = P_0 (local law applied), "
+                       "i >= 1 = a plan from P_i (or a stored box of level i) into P_{i-1}"
+              }.get(kind, "0 = local law (or x at the reference), 1 = the MPC problem was "
+                          "solved")
     levels = textwrap.fill("bits (CMPC_LEVEL(code)) are " + levels, 88,
                            initial_indent=" *       ", subsequent_indent=" *       ")
-    check = textwrap.fill(_SEQUENCE_CHECK if kind == "set_sequence" else _CONTRACTIVE_CHECK,
-                          88, initial_indent=" * ", subsequent_indent=" * ")
+    check = textwrap.fill({"set_sequence": _SEQUENCE_CHECK, "quasi": _QUASI_CHECK}.get(
+        kind, _CONTRACTIVE_CHECK), 88, initial_indent=" * ", subsequent_indent=" * ")
     return f"""/* Controller exported from casadi_cmpc: {what}.
  * Model '{model.name}': n = {model.n} states, m = {model.m} inputs, l = {model.l} disturbances.
  * Solver: {solver}{' (standalone C, libc and libm only)' if solver == 'sqp' else
@@ -648,6 +867,11 @@ def _source(body: str, intervals: str) -> str:
 def sequence_source(intervals: str) -> str:
     """The logic of a set-sequence controller; ``intervals`` defines ``cmpc_f_iv``."""
     return _source(_SEQUENCE, intervals)
+
+
+def quasi_source(intervals: str) -> str:
+    """The logic of a quasi multi-step controller; ``intervals`` defines ``cmpc_f_iv``."""
+    return _source(_QUASI, intervals)
 
 
 def contractive_source(intervals: str) -> str:

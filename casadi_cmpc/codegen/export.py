@@ -1,4 +1,5 @@
-"""C export of :class:`~casadi_cmpc.SetSequenceMPC` and :class:`~casadi_cmpc.ContractiveMPC`.
+"""C export of :class:`~casadi_cmpc.SetSequenceMPC`, :class:`~casadi_cmpc.ContractiveMPC` and
+:class:`~casadi_cmpc.mpc.quasi.QuasiMultiStepMPC`.
 
 The generated directory holds
 
@@ -192,9 +193,10 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
 
     Parameters
     ----------
-    ctrl : SetSequenceMPC or ContractiveMPC
+    ctrl : SetSequenceMPC, QuasiMultiStepMPC or ContractiveMPC
         The controller (its sets computed: a :class:`~casadi_cmpc.SetSequence` for
-        ``SetSequenceMPC``; a fixed ``horizon`` for ``ContractiveMPC``).
+        ``SetSequenceMPC``, a :class:`~casadi_cmpc.control.quasi.QuasiSequence` for
+        ``QuasiMultiStepMPC``; a fixed ``horizon`` for ``ContractiveMPC``).
     directory : str or Path
         Created if missing; an existing non-empty directory is refused unless
         ``overwrite=True`` (its contents are then replaced).
@@ -250,6 +252,16 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     model affine in w). With ``CMPC_FLAG_UNVERIFIED`` nothing is claimed about the applied
     control.
 
+    **The C check of a quasi multi-step controller** (Alg 6.8) proves a planned sequence
+    from x by interval evolution: ``X(k+1)`` is the outward-rounded natural inclusion of f
+    over the box ``X(k)``, the control and the box W (any model, affine in w or not);
+    ``X(1..a-1)`` must lie in the box X and ``X(a)`` in ``P_{i-1}`` (rows bounded upward).
+    The plan's controls are applied at the next calls (``CMPC_FLAG_FALLBACK``), the rest
+    proven again from each measured state. This check is looser than the Python
+    controller's zonotope evolution: where it fails, the stored sequence of x's box (proven
+    offline by zonotope evolution for the whole box) is applied with
+    ``CMPC_FLAG_WITNESS``; see the header for what each code claims.
+
     **The C check of a contractive MPC** evaluates the same exact check graph as the Python
     certificate (predicted states in X, path and terminal rows, contraction) by the same
     kind of generated interval evaluation, at the clipped solver sequence; a move returned
@@ -275,9 +287,11 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
         builder: Any = _SequenceExport(spec, solver)
     elif kind == "contractive":
         builder = _ContractiveExport(spec, solver)
+    elif kind == "quasi":
+        builder = _QuasiExport(spec, solver)
     else:
-        raise TypeError(f"export_c exports a SetSequenceMPC or a ContractiveMPC; got "
-                        f"{type(ctrl).__name__}")
+        raise TypeError(f"export_c exports a QuasiMultiStepMPC, a SetSequenceMPC or a "
+                        f"ContractiveMPC; got {type(ctrl).__name__}")
     model = spec.model
     if x0 is None:
         x0 = builder.default_x0()
@@ -484,6 +498,102 @@ class _SequenceExport:
 
     def source(self) -> str:
         return T.sequence_source(self.intervals)
+
+
+class _QuasiExport:
+    """Tables and logic of a :class:`~casadi_cmpc.mpc.quasi.QuasiMultiStepMPC` (from its
+    :class:`~casadi_cmpc.mpc.spec.QuasiSpec`)."""
+
+    kind = "quasi"
+
+    def __init__(self, spec: Any, solver: str) -> None:
+        self.spec, self.solver = spec, solver
+        model = spec.model
+        if len(spec.polytopes) < 2:
+            raise ExportError("the controller holds no quasi set (only the target)")
+        self.model_fun = _model_fun(model)
+        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv")],
+                                     "the C proof of a planned sequence")
+        n, m, i = model.n, model.m, spec.steps
+        self.poly_rows = [P.A.shape[0] for P in spec.polytopes]
+        counts = [b[0].shape[0] for b in spec.boxes]
+        self.box_off = np.cumsum([0] + counts)
+        self.box_lo = np.concatenate([b[0][..., 0] for b in spec.boxes]).reshape(-1, n)
+        self.box_hi = np.concatenate([b[0][..., 1] for b in spec.boxes]).reshape(-1, n)
+        self.box_u = np.concatenate([b[1].reshape(-1, i * m) for b in spec.boxes])
+        self.box_arrival = np.concatenate([b[2] for b in spec.boxes]).astype(int)
+        r = spec.rows
+        L = len(spec.nlp_rows)
+        self.nlp_H = np.zeros((L, r * n))
+        self.nlp_h = np.ones((L, r))
+        for j, (H, h) in enumerate(spec.nlp_rows):
+            self.nlp_H[j] = H.ravel(order="F")
+            self.nlp_h[j] = h
+        self.sizes = {"steps": i, "sets": len(spec.polytopes),
+                      "boxes": int(self.box_arrival.size),
+                      "polytope_rows": int(sum(self.poly_rows)), "rows": r}
+
+    def default_x0(self) -> np.ndarray:
+        B = self.spec.boxes[-1][0]
+        if B.shape[0]:
+            c = 0.5 * (B[..., 0] + B[..., 1])
+            return c[np.argmax(np.abs(c).sum(axis=1))]
+        return self.spec.model.X.mid
+
+    def functions(self) -> list[ca.Function]:
+        spec, model = self.spec, self.spec.model
+        py_solver = "sqp" if spec.plugin == "sqpmethod" else "ipopt"
+        S = _solver_for_export(spec.nlp, "cmpc_solver", self.solver, py_solver, spec.options)
+        funs = [S, self.model_fun]
+        if spec.local_law is not None:
+            x = ca.SX.sym("x", model.n)
+            funs.append(ca.Function("cmpc_law", [x], [spec.local_law(x)], ["x"], ["u"]))
+        return funs
+
+    def tables(self) -> str:
+        spec, model = self.spec, self.spec.model
+        out = ["/* Tables of the exported quasi multi-step controller (generated; do not "
+               "edit). */", "#ifndef CMPC_TABLES_H", "#define CMPC_TABLES_H", ""]
+        out.append(f"#define CMPC_STEPS {spec.steps}")
+        out.append(f"#define CMPC_NSETS {len(spec.polytopes)}")
+        out.append(f"#define CMPC_R {spec.rows}")
+        out.append(f"#define CMPC_NG {spec.lbg.size}")
+        out.append(f"#define CMPC_NBOXES {self.box_arrival.size}")
+        out.append(f"#define CMPC_HAS_LAW {0 if spec.local_law is None else 1}")
+        out.append("")
+        out.append(_c_array("int", "cmpc_poly_off", np.cumsum([0] + self.poly_rows)))
+        out.append(_c_array("double", "cmpc_poly_A",
+                            np.concatenate([P.A for P in spec.polytopes])))
+        out.append(_c_array("double", "cmpc_poly_b",
+                            np.concatenate([P.b for P in spec.polytopes])))
+        out.append(_c_array("double", "cmpc_x_lo", model.X.lo))
+        out.append(_c_array("double", "cmpc_x_hi", model.X.hi))
+        out.append(_c_array("double", "cmpc_u_lo", model.U.lo))
+        out.append(_c_array("double", "cmpc_u_hi", model.U.hi))
+        W = np.asarray(spec.W, dtype=float).reshape(-1, 2)
+        out.append(_c_array("double", "cmpc_w_lo", W[:, 0]))
+        out.append(_c_array("double", "cmpc_w_hi", W[:, 1]))
+        out.append(_c_array("double", "cmpc_lbx", spec.lbx))
+        out.append(_c_array("double", "cmpc_ubx", spec.ubx))
+        out.append(_c_array("double", "cmpc_lbg", spec.lbg))
+        out.append(_c_array("double", "cmpc_ubg", spec.ubg))
+        # NLP parameters (H column-major, h) per target level j = 0..M-1
+        out.append(_c_array("double", "cmpc_nlp_H", self.nlp_H))
+        out.append(_c_array("double", "cmpc_nlp_h", self.nlp_h))
+        # stored boxes per level (level m: rows box_off[m-1]..box_off[m]-1), sequences
+        out.append(_c_array("long", "cmpc_box_off", self.box_off))
+        out.append(_c_array("double", "cmpc_box_lo", self.box_lo))
+        out.append(_c_array("double", "cmpc_box_hi", self.box_hi))
+        out.append(_c_array("double", "cmpc_box_u", self.box_u))
+        out.append(_c_array("int", "cmpc_box_arrival", self.box_arrival))
+        out += ["", "#endif", ""]
+        return "\n".join(out)
+
+    def header(self) -> str:
+        return T.header(self.spec.model, self.kind, self.solver, self.sizes)
+
+    def source(self) -> str:
+        return T.quasi_source(self.intervals)
 
 
 class _ContractiveExport:

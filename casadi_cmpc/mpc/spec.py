@@ -1,8 +1,9 @@
 """What a controller hands to an exporter: the data its C export is generated from.
 
-:meth:`ContractiveMPC.export_spec <casadi_cmpc.ContractiveMPC.export_spec>` and
-:meth:`SetSequenceMPC.export_spec <casadi_cmpc.SetSequenceMPC.export_spec>` return these
-frozen records. They are the interface between the controllers and
+:meth:`ContractiveMPC.export_spec <casadi_cmpc.ContractiveMPC.export_spec>`,
+:meth:`SetSequenceMPC.export_spec <casadi_cmpc.SetSequenceMPC.export_spec>` and
+:meth:`QuasiMultiStepMPC.export_spec <casadi_cmpc.mpc.quasi.QuasiMultiStepMPC.export_spec>`
+return these frozen records. They are the interface between the controllers and
 :mod:`casadi_cmpc.codegen` (which reads nothing else of a controller), so that an exporter
 needs neither the controllers' internals nor an import of their modules. The CasADi
 Functions in them are the ones the Python controller evaluates, so that the generated code
@@ -17,7 +18,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-__all__ = ["ContractiveSpec", "HorizonProblem", "SetSequenceSpec"]
+__all__ = ["ContractiveSpec", "HorizonProblem", "QuasiSpec", "SetSequenceSpec"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,3 +181,55 @@ class SetSequenceSpec:
     v_lo: np.ndarray = field(default_factory=lambda: np.zeros(0))
     v_hi: np.ndarray = field(default_factory=lambda: np.zeros(0))
     kind: str = "set_sequence"
+
+
+@dataclass(frozen=True, eq=False)
+class QuasiSpec:
+    """The export data of a :class:`~casadi_cmpc.mpc.quasi.QuasiMultiStepMPC` (Alg 6.8).
+
+    Attributes
+    ----------
+    kind : str
+        ``"quasi"``.
+    model : Model
+    steps : int
+        i of the quasi i-step sets (length of every planned sequence).
+    polytopes : list of Polytope
+        ``P_0 = T, P_1, ..., P_M``.
+    boxes : list of tuple
+        Per level ``m = 1..M``: ``(inner (N_m, n, 2), controls (N_m, steps, m),
+        arrival (N_m,))``, the inner boxes of the m-th quasi set (towards ``P_{m-1}``) with
+        their stored sequences (NaN after arrival).
+    local_law : casadi.Function or None
+        ``x -> u`` applied in T.
+    nlp : dict
+        The NLP (6.22)-(6.23): ``x`` the controls (``steps m``), ``p = [x, vec(H), h]``
+        (the rows of the target polytope padded to ``rows``), ``f``, ``g``.
+    plugin, options
+        Solver plugin and options of the controller.
+    rows : int
+        r of the polytope parameter.
+    nlp_rows : list of tuple
+        Per target level ``j = 0..M-1``: ``(H (r, n), h (r,))``.
+    lbx, ubx, lbg, ubg : ndarray
+        Bounds of the NLP.
+    W : ndarray (l, 2)
+        The disturbance box the sets and every proof are about.
+    """
+
+    model: Any
+    steps: int
+    polytopes: list
+    boxes: list
+    local_law: ca.Function | None
+    nlp: dict
+    plugin: str
+    options: dict
+    rows: int
+    nlp_rows: list
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    W: np.ndarray
+    kind: str = "quasi"

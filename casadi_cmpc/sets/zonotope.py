@@ -13,7 +13,9 @@ V-representations, parallelotope bounding §4.2.5, Fig 4.7) and three functions:
   an interval matrix (Thm 4.3, (4.14)-(4.15));
 * :func:`kuhn_inclusion` - a zonotope containing ``{M x : M in [M], x in Z}``;
 * :func:`evolve` - one step of uncertain evolution ``f(Z, u, W)`` by the mean-value form and
-  Kühn's inclusion (Thm 4.4, (4.16)).
+  Kühn's inclusion (Thm 4.4, (4.16));
+* :func:`reach` (defined in :mod:`casadi_cmpc.sets._reach`) - outer bounds of the reachable
+  sets over a given control sequence, by zonotopes or intervals (Def 6.2, Fig 6.10).
 
 Rounding
 --------
@@ -50,7 +52,7 @@ from .base import SetBase
 from .box import Box
 from .polytope import Polytope
 
-__all__ = ["Zonotope", "zonotope_inclusion", "kuhn_inclusion", "evolve"]
+__all__ = ["Zonotope", "zonotope_inclusion", "kuhn_inclusion", "evolve", "reach"]
 
 #: Largest number of (n-1)-subsets of generators enumerated for facets (H-representation).
 MAX_FACETS = 20000
@@ -1271,3 +1273,7 @@ def _control_box(u: Any, m: int) -> np.ndarray:
     if np.isnan(pt).any():
         raise InvalidBoundsError("u contains NaN")
     return np.stack([pt, pt], axis=-1)[None]
+
+
+# the reachable sets over a control sequence (Def 6.2) build on the evolution above
+from ._reach import reach  # noqa: E402
