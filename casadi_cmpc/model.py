@@ -189,6 +189,9 @@ class Model:
         The given units, by variable name.
     dt : float or None
         Sampling time in seconds.
+    discretisation : str
+        What the map is, and so what its certificates are about (read-only; see
+        :attr:`discretisation`): ``"discrete model"`` unless built by :meth:`from_ode`.
 
     Raises
     ------
@@ -283,6 +286,92 @@ class Model:
         self._exact_f: ca.SX | None = None
         self._exact_params: tuple[ca.SX, np.ndarray] | None = None
         self._cache: dict[Any, Any] = {}
+        # what the model's certificates are about (see ``discretisation``); from_ode sets
+        # it, closed_loop keeps it
+        self._discretisation = "discrete model"
+        self._validation: dict[str, Any] | None = None  # a validated ODE model: its data
+
+    # ----------------------------------------------------------- what it models
+    @property
+    def discretisation(self) -> str:
+        """What the model's map is, and so what every certificate computed from it is about.
+
+        ``"discrete model"`` for a model given by its successor ``f``; for
+        :meth:`from_ode`: ``"the Euler map of an ODE (no error bound)"`` or ``"the RK4 map
+        of an ODE (no error bound)"`` (certificates are about that map, not the plant), or
+        ``"the sampled-data ODE (validated Taylor, order k, dt = ..., zero-order hold, w
+        constant over the sample)"``: the interval evaluators of such a model enclose the
+        true flow of the ODE (see :meth:`from_ode`). A closed loop keeps the string of its
+        open-loop model.
+        """
+        return self._discretisation
+
+    @property
+    def is_validated(self) -> bool:
+        """True for a validated sampled-data ODE model (``from_ode(method="taylor")``) and
+        its closed loops: the interval evaluators enclose the true flow."""
+        return self._validation is not None
+
+    @property
+    def validation(self) -> dict[str, Any] | None:
+        """Data of a validated ODE model (None otherwise): ``order``, ``dt`` (time units of
+        the ODE), ``domain`` (the validated domain D over (x, u, w), shape (n + m + l, 2);
+        boxes leaving it give ``[-inf, inf]``), ``centre``, ``rho`` (n, 2) and ``M``
+        (n, n + m + l, 2) of the remainder ``rho + M (z - centre)``, ``apriori`` (n, 2),
+        an enclosure of all trajectories from D over one sample, and
+        ``remainder_width``, the largest width of the remainder over D."""
+        return None if self._validation is None else dict(self._validation)
+
+    def interval_key(self) -> str:
+        """A hash (20 hex digits) of everything an interval evaluation of the model reads:
+        its interval source (:attr:`interval_function`, serialized) and the intervals of
+        its parameters. Two validated models with the same Taylor map but different
+        remainders (other boxes, order, dt) differ here, not in a hash of :attr:`function`;
+        key cached certificates with it."""
+        import hashlib
+
+        def build() -> str:
+            src = self.interval_function
+            h = hashlib.sha256()
+            if isinstance(src, ParamFunction):
+                h.update(src.function.serialize().encode())
+                h.update(np.ascontiguousarray(src.bounds).tobytes())
+                h.update(np.asarray(sorted(src.derived), dtype=np.int64).tobytes())
+            else:
+                h.update(src.serialize().encode())
+            return h.hexdigest()[:20]
+
+        return self._cached("interval_key", build)
+
+    def interval_expr(self) -> tuple[ca.SX, ca.SX, np.ndarray]:
+        """The successor as an expression for interval evaluators, with its parameters.
+
+        Returns ``(expr, params, bounds)``: ``expr`` (n, 1) in :attr:`x`, :attr:`u`,
+        :attr:`w` (``casadi.SX.sym("w", 0)`` without disturbance) and ``params`` (q, 1);
+        ``bounds`` (q, 2) the interval of every parameter. Every literal constant is a
+        parameter (exact, ``lo == hi``), constants CasADi may have rounded while composing
+        are widened, and a validated ODE model's remainder terms are interval valued
+        (``lo < hi``). Build composed evaluators as::
+
+            expr, P, Pb = model.interval_expr()
+            H = casadi.SX.sym("H", r, model.n)
+            g = casadi.Function("rows", [model.x, model.u, model._w_sym,
+                                         casadi.vertcat(casadi.vec(H), P)],
+                                [casadi.mtimes(H, expr)])
+            vals = numpy.vstack([numpy.repeat(A.ravel(order="F")[:, None], 2, axis=1), Pb])
+            F = InclusionFunction(ParamFunction(g, 3, vals), "centered")
+
+        Use it (or :meth:`interval_map`) instead of :attr:`f` wherever an interval
+        evaluator is compiled: :attr:`f` of a validated model is only the Taylor
+        polynomial, and of a closed loop a rounded composition.
+        """
+        def build() -> tuple[ca.SX, ca.SX, np.ndarray]:
+            pg = ParamGraph(self.interval_function)
+            expr = ca.Function("expr", pg.inputs + [pg.params], pg.outputs).call(
+                [self.x, self.u, self._w_sym, pg.params])[0]
+            return expr, pg.params, pg.bounds.copy()
+
+        return self._cached("interval_expr", build)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -611,6 +700,8 @@ class Model:
     @property
     def has_affine_control_part(self) -> bool:
         """True when f = g(x, w) + B u with a constant B (thesis §6.3)."""
+        if self._validation is not None:  # the true flow is not affine in u: no constant B
+            return False
         return self.m > 0 and not self._depends(self._jac("u"), self._all_syms())
 
     @property
@@ -709,13 +800,16 @@ class Model:
                    units={k: v for k, v in self.units.items() if k in names})
         cl.law = law_sx
         cl.input_box = self.U
+        cl._discretisation = self._discretisation
+        cl._validation = self._validation
         try:
             cl._exact_f, params, values = self._exact_closed_loop(law_sx)
             cl._exact_params = (params, values)
         except UnsupportedOperationError:
             # f calls a Function (never_inline): no interval evaluator can be compiled from
             # it, and the structure tests take every variable as entering nonlinearly
-            pass
+            if self._validation is not None:  # pragma: no cover - from_ode builds SX only
+                raise
         return cl
 
     def _exact_closed_loop(self, law_sx: ca.SX) -> tuple[ca.SX, ca.SX, np.ndarray]:
@@ -728,13 +822,18 @@ class Model:
         composition are widened by :func:`~casadi_cmpc.interval._derivative.exact_function`.
         Raises UnsupportedOperationError when f or the law calls a Function.
         """
-        pf = ParamGraph(self.function)
+        # the exact form of a validated ODE model (interval-valued remainder), else f
+        pf = ParamGraph(self.interval_function if self._exact_f is not None
+                        else self.function)
         # dense law: a structural zero would enter f as the number 0 and fold
         pl = ParamGraph(ca.Function("law", [self.x], [ca.densify(law_sx)]))
         law_p = ca.Function("law_p", pl.inputs + [pl.params], pl.outputs).call(
             [self.x, pl.params])[0]
         f_p = ca.Function("f_p", pf.inputs + [pf.params], pf.outputs).call(
             [self.x, law_p, self._w_sym, pf.params])[0]
+        bounds = np.concatenate([pf.bounds, pl.bounds])
+        if (bounds[:, 0] < bounds[:, 1]).any():  # interval-valued or widened parameters
+            return f_p, ca.vertcat(pf.params, pl.params), bounds
         return (f_p, ca.vertcat(pf.params, pl.params),
                 np.concatenate([pf.values, pl.values]))
 
@@ -835,6 +934,11 @@ class Model:
             lines.append(f"  W = {self.W!r}")
         lines.append(f"  sampling time dt = {self.dt:g} s" if self.dt is not None
                      else "  sampling time: not given (time in steps k)")
+        lines.append(f"  map: {self.discretisation}")
+        if self._validation is not None:
+            v = self._validation
+            lines.append(f"  validated domain (x, u, w) = {np.round(v['domain'], 6).tolist()};"
+                         f" remainder width <= {v['remainder_width']:.3g}")
         if self.law is not None:
             lines.append(f"  closed loop with u = {self.law}")
         lines.append(f"  linear: {self.is_linear}; affine in u: {self.is_affine_in_u}; "
@@ -849,29 +953,77 @@ class Model:
     @classmethod
     def from_ode(cls, x: Any, u: Any, rhs: Any, dt: float, method: str = "euler", w: Any = None,
                  X: Any = None, U: Any = None, W: Any = None, name: str = "model",
-                 substeps: int = 1, *, time_unit: float | None = None,
-                 **labels: Any) -> Model:
+                 substeps: int = 1, *, time_unit: float | None = None, order: int = 4,
+                 domain_margin: float = 0.05, **labels: Any) -> Model:
         """Discretise ``dx/dt = rhs(x, u, w)`` with a fixed step ``dt`` (time units of rhs).
+
+        u is held constant over the sample (zero-order hold) and so is w (a disturbance
+        constant over each sample).
 
         Parameters
         ----------
+        x, u, w : casadi.SX, shapes (n, 1), (m, 1), (l, 1)
+            Symbols of the state, input and (optional) disturbance.
+        rhs : casadi.SX, shape (n, 1)
+            The right-hand side, in state units per time unit.
+        dt : float
+            The sampling time in time units of ``rhs``.
+        method : {"euler", "rk4", "taylor"}
+            ``"euler"``/``"rk4"``: explicit Euler or classical Runge-Kutta 4 with
+            ``substeps`` steps of ``dt / substeps`` per sample. No error bound: every
+            certificate is about that map, not the ODE (see :attr:`discretisation`).
+            ``"taylor"``: a *validated* sampled-data model. :attr:`f` (used by the
+            optimisers, :meth:`step`, simulation and the C export of the controller) is
+            the Taylor polynomial of order ``order`` of the flow in dt, built from the Lie
+            derivatives ``F^[1] = rhs``, ``F^[i+1] = (dF^[i]/dx) rhs``; every interval
+            evaluator (:meth:`inclusion`, :meth:`jacobian_inclusion`,
+            :meth:`interval_map`, :meth:`interval_expr`, closed loops) encloses the true
+            flow ``phi(dt; x, u, w)``: the Taylor polynomial plus a proven remainder
+            ``rho + M (z - z_c)`` with interval ``rho``, ``M`` (Lagrange remainder over
+            an a-priori enclosure of the trajectories, and of the variational equation for
+            ``M``; see :mod:`casadi_cmpc._taylor`). The remainder holds on the validated
+            domain: X, U, W each widened by ``domain_margin`` times its width; boxes that
+            leave it give ``[-inf, inf]``. rhs must be smooth there: operations that jump
+            or are not differentiable (floor, if_else, comparisons, sign, fmod, fabs,
+            fmin, fmax, ...) are refused.
+        X, U, W : Box or array_like
+            The boxes of x, u, w (X and U required for ``"taylor"``).
+        name : str
+        substeps : int
+            Steps per sample of euler/rk4 (must be 1 for ``"taylor"``).
         time_unit : float, optional
             Seconds per time unit of ``rhs`` (e.g. 60 for an ODE in minutes): the model's
             sampling time :attr:`dt` is then ``dt * time_unit`` seconds (default: unknown).
+        order : int
+            Taylor order k of ``"taylor"``, 1 to 12 (default 4).
+        domain_margin : float
+            Relative widening of X, U, W into the validated domain of ``"taylor"``.
         **labels
             ``state_names``, ``input_names``, ``disturbance_names``, ``units``: passed on to
             :class:`Model`.
-        method : {"euler", "rk4"}
-            Explicit Euler or classical Runge-Kutta 4, with ``substeps`` steps of ``dt/substeps``
-            per sample (u and w held constant over the sample).
+
+        Raises
+        ------
+        ValueError
+            Unknown method, bad dt, substeps, order.
+        UnsupportedOperationError
+            ``"taylor"`` with an rhs that may jump or is not smooth.
+        ModelError
+            ``"taylor"``: the ODE cannot be validated on the domain (no a-priori enclosure,
+            rhs undefined or unbounded there).
         """
         method = str(method).lower()
-        if method not in ("euler", "rk4"):
-            raise ValueError(f"unknown method '{method}'; valid methods: euler, rk4")
+        if method not in ("euler", "rk4", "taylor"):
+            raise ValueError(f"unknown method '{method}'; valid methods: euler, rk4, taylor")
+        if isinstance(dt, (bool, np.bool_)):
+            raise TypeError("dt must be a number, not a bool")
         if not np.isfinite(dt) or dt <= 0:
             raise ValueError(f"dt must be a positive finite number; got {dt}")
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be a positive integer; got {substeps}")
+        if method == "taylor" and substeps != 1:
+            raise ValueError("method='taylor' takes one step per sample (substeps=1); raise "
+                             "the order instead, or lower dt")
         if u is None:
             u = ca.SX.sym("u", 0)
         x, u, w, rhs = _to_sx(x, u, w, rhs)
@@ -886,7 +1038,16 @@ class Model:
                 f"rhs must have as many elements as x; expected {x.numel()} instead of "
                 f"{rhs.numel()}")
         _check_free(rhs, [x, u, w], "rhs")
-        rhs = ca.reshape(rhs, x.numel(), 1)
+        rhs = ca.reshape(ca.densify(rhs), x.numel(), 1)
+        bad = set(labels) - {"state_names", "input_names", "disturbance_names", "units"}
+        if bad:
+            raise TypeError(f"from_ode got unexpected keyword(s) {sorted(bad)}")
+        if time_unit is not None and (not np.isfinite(time_unit) or time_unit <= 0):
+            raise ValueError(f"time_unit must be a positive number of seconds; got {time_unit}")
+        secs = None if time_unit is None else float(dt) * float(time_unit)
+        if method == "taylor":
+            return cls._from_ode_taylor(x, u, w, rhs, float(dt), X, U, W, name, secs,
+                                        order, domain_margin, labels)
         args = [x, u] + ([w] if w is not None else [])
         g = ca.Function("rhs", args, [rhs])
         h = float(dt) / int(substeps)
@@ -901,13 +1062,40 @@ class Model:
                 k3 = g(xk + h / 2 * k2, u, *extra)
                 k4 = g(xk + h * k3, u, *extra)
                 xk = xk + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        bad = set(labels) - {"state_names", "input_names", "disturbance_names", "units"}
-        if bad:
-            raise TypeError(f"from_ode got unexpected keyword(s) {sorted(bad)}")
-        if time_unit is not None and (not np.isfinite(time_unit) or time_unit <= 0):
-            raise ValueError(f"time_unit must be a positive number of seconds; got {time_unit}")
-        secs = None if time_unit is None else float(dt) * float(time_unit)
-        return cls(x=x, u=u, f=xk, w=w, X=X, U=U, W=W, name=name, dt=secs, **labels)
+        model = cls(x=x, u=u, f=xk, w=w, X=X, U=U, W=W, name=name, dt=secs, **labels)
+        model._discretisation = (f"the {'Euler' if method == 'euler' else 'RK4'} map of an "
+                                 f"ODE (no error bound)")
+        return model
+
+    @classmethod
+    def _from_ode_taylor(cls, x: ca.SX, u: ca.SX, w: ca.SX | None, rhs: ca.SX, dt: float,
+                         X: Any, U: Any, W: Any, name: str, secs: float | None, order: Any,
+                         margin: Any, labels: dict[str, Any]) -> Model:
+        """The validated Taylor model of :meth:`from_ode` (method "taylor")."""
+        from ._taylor import taylor_model
+
+        n, m = x.numel(), u.numel()
+        if X is None:
+            raise ModelError("the state box X is required (e.g. X=cm.Box(lo, hi))")
+        if U is None and m > 0:
+            raise ModelError("the input box U is required (e.g. U=cm.Box(lo, hi))")
+        if w is not None and W is None:
+            raise ModelError("w is given but its range W is missing; pass W=cm.Box(lo, hi)")
+        Xb = _as_model_box(X, n, "X")
+        Ub = _as_model_box(U, m, "U") if U is not None else Box(np.zeros(0), np.zeros(0))
+        Wb = _as_model_box(W, w.numel(), "W") if w is not None else None
+        f_num, exact, params, bounds, info = taylor_model(
+            x, u, w, rhs, dt, order, Xb, Ub, Wb, margin=margin)
+        model = cls(x=x, u=u, f=f_num, w=w, X=Xb, U=Ub if m else None, W=Wb, name=name,
+                    dt=secs, **labels)
+        model._exact_f = exact
+        model._exact_params = (params, bounds)
+        model._validation = info
+        model._discretisation = (
+            f"the sampled-data ODE (validated Taylor, order {info['order']}, dt = {dt:g}"
+            f"{'' if secs is None else f' (= {secs:g} s)'}, zero-order hold, w constant "
+            "over the sample)")
+        return model
 
 
 def _check_wrt(wrt: str) -> str:

@@ -28,6 +28,12 @@ module, so that the import stays fast) and the local law that proves it::
     three_tank          3 states: three tanks in a cascade, sqrt outflows, levels held at
                         a non-zero equilibrium, RK4 dt = 5 s
 
+Validated sampled-data models of ODEs (``Model.from_ode(method="taylor")``: every interval
+evaluation encloses the true flow), loaded by name and listed by ``names(validated=True)``::
+
+    moore_greitzer      2 states: Moore-Greitzer jet engine (ROCS engine2dRS), tau = 0.1
+    cstr_validated      the CSTR ODE of E6/E14 around its equilibrium, dt = 0.01 min
+
 Terminal sets given here are the thesis data where the thesis prints them; where it
 does not (E11, E12) they are choices recorded in ``info["choices"]`` and are *not*
 certified by this module.
@@ -62,6 +68,12 @@ _REGISTRY: dict[str, str] = {
     "mirosot": "mirosot",
     "cartpole": "cartpole",
     "three_tank": "three_tank",
+}
+# validated sampled-data models of ODEs (Model.from_ode(method="taylor")): loaded by name
+# like the others, listed by names(validated=True)
+_VALIDATED: dict[str, str] = {
+    "moore_greitzer": "moore_greitzer",
+    "cstr_validated": "cstr_validated",
 }
 
 
@@ -128,10 +140,11 @@ class Example:
             raise ValueError(f"local law of example '{self.name}' must have {m} elements")
 
 
-def names() -> list[str]:
-    """Names accepted by :func:`load`: the thesis examples in their order, then the
-    further examples."""
-    return list(_REGISTRY)
+def names(validated: bool = False) -> list[str]:
+    """Names of the examples: the thesis examples in their order, then the further
+    examples; with ``validated=True`` also the validated sampled-data ODE models
+    (``moore_greitzer``, ``cstr_validated``), which :func:`load` accepts as well."""
+    return list(_REGISTRY) + (list(_VALIDATED) if validated else [])
 
 
 def load(name: str) -> Example:
@@ -143,7 +156,8 @@ def load(name: str) -> Example:
         ``name`` is not one of :func:`names`.
     """
     key = str(name)
-    if key not in _REGISTRY:
-        raise ValueError(f"unknown example '{name}'; valid names: {', '.join(_REGISTRY)}")
-    module = importlib.import_module(f"{__name__}.{_REGISTRY[key]}")
+    table = {**_REGISTRY, **_VALIDATED}
+    if key not in table:
+        raise ValueError(f"unknown example '{name}'; valid names: {', '.join(table)}")
+    module = importlib.import_module(f"{__name__}.{table[key]}")
     return module.build()

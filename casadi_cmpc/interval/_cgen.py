@@ -38,6 +38,7 @@ Operations without a rule here (``erfinv``, calls of other Functions, ...) raise
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import casadi as ca
 
@@ -94,11 +95,12 @@ def c_double(v: float) -> str:
 
 def _as_sx(fun: ca.Function) -> ca.Function:
     """``fun`` checked as for the Python interval compiler (SX or expandable, no free
-    symbols, dense inputs), its refusals raised as :class:`UnsupportedIntervalOp`."""
+    symbols, dense inputs; a :class:`~._derivative.ParamFunction` as it is), its refusals
+    raised as :class:`UnsupportedIntervalOp`."""
     from .compiler import _as_sx_function
 
     try:
-        return _as_sx_function(fun)
+        return _as_sx_function(fun, allow_param=True)
     except (UnsupportedOperationError, FreeSymbolError, DimensionError) as exc:
         raise UnsupportedIntervalOp(str(exc)) from exc
 
@@ -112,9 +114,14 @@ def unsupported_ops(fun: ca.Function) -> list[str]:
     return sorted(_op_name(op) for op in bad)
 
 
-def interval_function(fun: ca.Function, name: str) -> str:
+def interval_function(fun: Any, name: str) -> str:
     """C text of ``static void name(il, ih, ol, oh)``: the natural interval inclusion of the
     SX Function ``fun``, outward rounded (see the module notes).
+
+    ``fun`` may be a :class:`~casadi_cmpc.interval._derivative.ParamFunction` (e.g.
+    :meth:`casadi_cmpc.Model.interval_map` of a closed loop or of a validated ODE model):
+    its parameters are written as constants, a possibly rounded one (``derived``) widened
+    as by the Python compiler, an interval-valued one as its interval.
 
     ``il[i]``/``ih[i]`` point to the lower/upper bounds of input ``i`` (dense, its
     ``numel`` entries); ``ol[o]``/``oh[o]`` receive the bounds of output ``o`` (dense,
@@ -142,6 +149,8 @@ def interval_function(fun: ca.Function, name: str) -> str:
                         "0.0;")
     nz_pos = [list(fun.sparsity_out(o).find()) for o in range(fun.n_out())]
     consts: dict[int, float] = {}  # slot -> the finite constant it holds
+    interval_of = getattr(fun, "instruction_bounds", None)
+    widen = frozenset(getattr(fun, "derived", ()))
     for k in range(fun.n_instructions()):
         op = fun.instruction_id(k)
         ins = list(fun.instruction_input(k))
@@ -152,6 +161,14 @@ def interval_function(fun: ca.Function, name: str) -> str:
         if op == ca.OP_CONST:
             v = float(fun.instruction_constant(k))
             used.add(outs[0])
+            iv = interval_of(k) if interval_of is not None else None
+            if iv is not None or k in widen:
+                from .compiler import _widen_constant
+
+                lo, hi = iv if iv is not None else _widen_constant(v)
+                body.append(f"    v{outs[0]}.lo = {c_double(lo)}; v{outs[0]}.hi = "
+                            f"{c_double(hi)}; /* [{lo!r}, {hi!r}] */")
+                continue
             c = c_double(v)
             note = f" /* {v!r} */" if math.isfinite(v) else ""
             body.append(f"    v{outs[0]}.lo = v{outs[0]}.hi = {c};{note}")

@@ -85,8 +85,18 @@ class ParamGraph:
         Per output, per nonzero: bit set of the guards it depends on.
     widen : ndarray of bool, shape (p,)
         True for the constants that are not exact literals but values CasADi may have
-        rounded (those a :class:`ParamFunction` ``fun`` lists in ``derived``): they are
-        enclosed with a margin wherever the graph is evaluated, and never decide a guard.
+        rounded (those a :class:`ParamFunction` ``fun`` lists in ``derived``, other than
+        its interval-valued ones): they are enclosed with a margin wherever the graph is
+        evaluated, and never decide a guard.
+    interval : ndarray of bool, shape (p,)
+        True for the interval-valued parameters of a :class:`ParamFunction` ``fun``
+        (their interval in ``bounds``); they never decide a guard either.
+    bounds : ndarray, shape (p, 2)
+        The interval every parameter stands for wherever the graph is evaluated: ``[v, v]``
+        for an exact literal, the widened interval around ``v`` for a possibly rounded
+        constant, and the given interval of an interval-valued parameter of a
+        :class:`ParamFunction` ``fun`` (``values`` then holds its midpoint). Code that
+        feeds the parameters to an interval evaluator must feed these bounds.
 
     ``fun`` may also be a :class:`ParamFunction`: its literals (and its widened constants)
     become parameters like any other constant.
@@ -103,6 +113,9 @@ class ParamGraph:
         params: list[ca.SX] = []
         values: list[float] = []
         widen: list[bool] = []
+        bounds: list[tuple[float, float]] = []
+        interval: list[bool] = []
+        interval_of = getattr(fun, "instruction_bounds", None)
         guard_exprs: list[ca.SX] = []
         self.guards: list[tuple[str, int, float]] = []
         nz_out: list[list[Any]] = [[None] * fun.nnz_out(i) for i in range(fun.n_out())]
@@ -115,11 +128,17 @@ class ParamGraph:
                 p = ca.SX.sym(f"c{len(params)}")
                 params.append(p)
                 v = float(fun.instruction_constant(k))
+                iv = interval_of(k) if interval_of is not None else None
                 values.append(v)
-                widen.append(k in derived)
+                interval.append(iv is not None)
+                widen.append(k in derived and iv is None)
+                if iv is not None:
+                    bounds.append(iv)
+                else:
+                    bounds.append(_widened(v) if k in derived else (v, v))
                 work[outs[0]] = p
                 mask[outs[0]] = 0
-                if k in derived:  # possibly rounded: its value decides no guard
+                if k in derived or iv is not None:  # not an exact number: decides no guard
                     const_val.pop(outs[0], None)
                 else:
                     const_val[outs[0]] = v
@@ -153,6 +172,9 @@ class ParamGraph:
         self.params = ca.vertcat(*params) if params else ca.SX(0, 1)
         self.values = np.asarray(values, dtype=float)
         self.widen = np.asarray(widen, dtype=bool)
+        self.bounds = (np.asarray(bounds, dtype=float).reshape(-1, 2) if bounds
+                       else np.zeros((0, 2)))
+        self.interval = np.asarray(interval, dtype=bool)
         self.outputs = [ca.SX(fun.sparsity_out(i), ca.vertcat(*nz_out[i]))
                         if nz_out[i] else ca.SX(fun.sparsity_out(i))
                         for i in range(fun.n_out())]
@@ -163,6 +185,10 @@ class ParamGraph:
         """``Function(inputs + [params] -> outputs)`` viewed with the params as constants."""
         g = ca.Function(name, list(inputs) + [self.params], list(outputs),
                         {"live_variables": False})
+        if self.interval.any():  # interval-valued parameters: pass their bounds
+            values = self.bounds.copy()
+            values[self.widen] = self.values[self.widen, None]  # widened by ParamFunction
+            return ParamFunction(g, len(inputs), values, self.widen)
         return ParamFunction(g, len(inputs), self.values, self.widen)
 
 
@@ -283,8 +309,12 @@ class ParamFunction:
         SX Function whose last input is the parameter vector ``p`` (dense, shape (q, 1)).
     n_real : int
         Number of inputs before ``p``.
-    values : ndarray, shape (q,)
-        The values of ``p``.
+    values : ndarray, shape (q,) or (q, 2)
+        The values of ``p``; or, as rows ``[lo, hi]``, the intervals they stand for: a
+        parameter with ``lo < hi`` is *interval-valued* (every evaluator reads it as the
+        constant interval ``[lo, hi]``: the expression then encloses a family of
+        functions, e.g. a remainder term known only to lie in an interval), one with
+        ``lo == hi`` is exact.
     widen : ndarray of bool, shape (q,), optional
         True for the parameters whose value may be rounded (enclosed with a margin instead
         of thin); default: all exact.
@@ -296,38 +326,69 @@ class ParamFunction:
     Attributes
     ----------
     literals : frozenset of int
-        Instructions that read ``p``.
+        Instructions that read an exact (thin or widened) parameter of ``p``.
     derived : frozenset of int
-        Constant instructions (reads of widened parameters, and the constants of ``g`` with
-        ``widen_own``) that an interval evaluation must widen.
+        Constant instructions that an interval evaluation must not take as exact numbers:
+        reads of widened parameters and of interval-valued ones (:meth:`instruction_bounds`
+        gives their interval), and the constants of ``g`` with ``widen_own``.
+    values : ndarray, shape (q,)
+        The values (of an interval-valued parameter: its midpoint, for display only).
+    bounds : ndarray, shape (q, 2)
+        What an interval evaluator must feed for each parameter: ``[v, v]``, the widened
+        interval of a possibly rounded value, or the given interval.
+    interval : ndarray of bool, shape (q,)
+        True for the interval-valued parameters.
     """
 
     def __init__(self, g: ca.Function, n_real: int, values: np.ndarray,
                  widen: np.ndarray | None = None, widen_own: bool = False) -> None:
         self._g = g
         self._n = int(n_real)
-        values = np.asarray(values, dtype=float).reshape(-1)
-        if values.size != g.nnz_in(self._n):
-            raise ValueError(f"'{g.name()}' has {g.nnz_in(self._n)} parameters; got "
-                             f"{values.size} values")
-        wid = (np.zeros(values.size, dtype=bool) if widen is None
+        q = g.nnz_in(self._n)
+        arr = np.asarray(values, dtype=float)
+        if arr.ndim == 2 and arr.shape == (q, 2) and q > 0:
+            lo, hi = arr[:, 0].copy(), arr[:, 1].copy()
+            if not (lo <= hi).all():
+                raise ValueError(f"'{g.name()}': interval parameters need lo <= hi (no NaN)")
+            with np.errstate(over="ignore", invalid="ignore"):
+                mid = np.where(lo == hi, lo, 0.5 * lo + 0.5 * hi)
+        else:
+            mid = arr.reshape(-1)
+            if mid.size != q:
+                raise ValueError(f"'{g.name()}' has {q} parameters; got {mid.size} values")
+            lo, hi = mid, mid
+        wid = (np.zeros(q, dtype=bool) if widen is None
                else np.asarray(widen, dtype=bool).reshape(-1))
+        self.interval = np.asarray(lo < hi, dtype=bool)
         self._const: dict[int, float] = {}
+        self._bounds: dict[int, tuple[float, float]] = {}
         derived = set()
         for k in range(g.n_instructions()):
             op = g.instruction_id(k)
             if op == ca.OP_INPUT:
                 ins = g.instruction_input(k)
                 if ins[0] == self._n:
-                    self._const[k] = float(values[ins[1]])
-                    if wid[ins[1]]:
+                    j = ins[1]
+                    self._const[k] = float(mid[j])
+                    if self.interval[j]:  # its interval (widened too if flagged)
+                        b_lo, b_hi = float(lo[j]), float(hi[j])
+                        if wid[j]:
+                            b_lo, b_hi = _widened(b_lo)[0], _widened(b_hi)[1]
+                        self._bounds[k] = (b_lo, b_hi)
+                    if wid[j] or self.interval[j]:
+                        # not an exact number: code that only knows thin or widened
+                        # constants (e.g. a contractor) must refuse it
                         derived.add(k)
             elif op == ca.OP_CONST and widen_own:
                 derived.add(k)
-        self.literals = frozenset(self._const)
+        self.literals = frozenset(k for k in self._const if k not in self._bounds)
         self.derived = frozenset(derived)
-        self.values = values
+        self.values = np.asarray(mid, dtype=float)
         self.widen = wid
+        b = np.stack([lo, hi], axis=1).astype(float) if q else np.zeros((0, 2))
+        for j in np.flatnonzero(wid):
+            b[j] = _widened(float(b[j, 0]))[0], _widened(float(b[j, 1]))[1]
+        self.bounds = b
 
     def instruction_id(self, k: int) -> int:
         return ca.OP_CONST if k in self._const else self._g.instruction_id(k)
@@ -337,6 +398,12 @@ class ParamFunction:
 
     def instruction_constant(self, k: int) -> float:
         return self._const[k] if k in self._const else self._g.instruction_constant(k)
+
+    def instruction_bounds(self, k: int) -> tuple[float, float] | None:
+        """``(lo, hi)`` of the constant instruction ``k`` when it reads an interval-valued
+        parameter (to be used as it is, not widened further), else None (an exact or
+        widened constant, see :attr:`derived`)."""
+        return self._bounds.get(k)
 
     def n_in(self) -> int:
         return self._n
@@ -353,7 +420,8 @@ class ParamFunction:
 
     def __repr__(self) -> str:
         return (f"ParamFunction('{self._g.name()}', {self._n} inputs, "
-                f"{self.values.size} parameters, {len(self.derived)} widened constants)")
+                f"{self.values.size} parameters ({int(self.interval.sum())} interval-valued), "
+                f"{len(self.derived)} widened constants)")
 
 
 def exact_function(name: str, inputs: Sequence[ca.SX], outputs: Sequence[ca.SX],
@@ -370,8 +438,9 @@ def exact_function(name: str, inputs: Sequence[ca.SX], outputs: Sequence[ca.SX],
     params : casadi.SX, shape (q, 1)
         Symbols standing for exact numbers (e.g. :attr:`ParamGraph.params` of the graphs
         composed into ``outputs``).
-    values : ndarray, shape (q,)
-        Their values.
+    values : ndarray, shape (q,) or (q, 2)
+        Their values, or the intervals ``[lo, hi]`` they stand for (see
+        :class:`ParamFunction`).
 
     Returns
     -------
@@ -380,8 +449,16 @@ def exact_function(name: str, inputs: Sequence[ca.SX], outputs: Sequence[ca.SX],
         while composing (``a - a`` -> 0, then ``acos(0)`` folded) and is widened.
     """
     g = ca.Function(name, list(inputs) + [params], list(outputs), {"live_variables": False})
-    return ParamFunction(g, len(inputs), np.asarray(values, dtype=float).reshape(-1),
-                         widen_own=True)
+    vals = np.asarray(values, dtype=float)
+    if not (vals.ndim == 2 and vals.shape[1:] == (2,)):
+        vals = vals.reshape(-1)
+    return ParamFunction(g, len(inputs), vals, widen_own=True)
+
+
+def _widened(v: float) -> tuple[float, float]:
+    from .compiler import _widen_constant
+
+    return _widen_constant(v)
 
 
 def rule_constants(g: ParamFunction) -> frozenset[int]:

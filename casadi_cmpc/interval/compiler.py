@@ -187,6 +187,7 @@ class _Codegen:
         """Walk the instruction list: fold constants, emit the other instructions through
         :meth:`_input`, :meth:`_output`, :meth:`_unary` and :meth:`_binary`."""
         f = self.fun
+        interval_of = getattr(f, "instruction_bounds", None)  # interval-valued parameters
         for k in range(f.n_instructions()):
             if self.only is not None and k not in self.only:
                 continue
@@ -195,7 +196,10 @@ class _Codegen:
             outs = list(f.instruction_output(k))
             if op == ca.OP_CONST:
                 v = float(f.instruction_constant(k))
-                if k in self.widen:
+                iv = interval_of(k) if interval_of is not None else None
+                if iv is not None:  # an interval-valued parameter, as it is
+                    self.consts[outs[0]] = (float(iv[0]), float(iv[1]))
+                elif k in self.widen:
                     lo, hi = _widen_constant(v)
                     self.consts[outs[0]] = (lo, hi)
                 else:
