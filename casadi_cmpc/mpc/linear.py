@@ -72,9 +72,9 @@ import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from .._validate import as_float_array
-from ..exceptions import DimensionError, InvalidBoundsError
+from ..exceptions import DimensionError, InvalidBoundsError, ModelError
 from ..sets._exact import rat_nullspace
-from ..sets._lp import HIGHS_OPTIONS
+from ..sets._lp import HIGHS_OPTIONS, OPTIMAL, block_lp
 from ..sets.box import Box
 from ..sets.polytope import Polytope
 
@@ -998,3 +998,223 @@ def _place(M: np.ndarray, col0: int, nv: int) -> sp.csr_matrix:
 def _box_min(M: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """``min_{lo <= x <= hi} M x`` row by row (floating point)."""
     return np.minimum(M * lo, M * hi).sum(axis=1)
+
+
+# ----------------------------------------------------------------------------- one step
+#: Inward margin of every target row handed to HiGHS, in units of the row's scale
+#: (``max(|H_k| . max|X|, |h_k|)``): ten times HiGHS's feasibility tolerance (1e-10), so
+#: that a solution HiGHS calls feasible has a true slack of at least 9e-10 of the scale,
+#: far above the rounding of the interval check that decides the step.
+ONE_STEP_MARGIN = 1e-9
+#: Slack (same units) below which the most interior control is not refined by a second LP.
+_SLACK_FLOOR = 2e-10
+
+
+@dataclass(frozen=True)
+class OneStepCandidate:
+    """One control proposed by :class:`OneStepLP` (a candidate: nothing is proven).
+
+    Attributes
+    ----------
+    u : ndarray, shape (m,)
+        The control, inside U (clipped exactly).
+    xi : float
+        Gauge value ``max_k G_k (x+ - x_ref)`` at u, worst case over W (floating point;
+        NaN without a gauge).
+    member : int
+        Index of the target polytope of ``K_{i-1}`` the LP aimed at.
+    how : str
+        ``"lp"`` (the LP (3.9)-(3.10) with every row moved inward by the margin),
+        ``"lp, smaller margin"`` (the same with half the largest available slack) or
+        ``"most interior"`` (the control that maximises the smallest scaled slack).
+    slack : float
+        The LP's smallest scaled slack of the target rows at u (estimate, floating point).
+    """
+
+    u: np.ndarray
+    xi: float
+    member: int
+    how: str
+    slack: float
+
+
+class OneStepLP:
+    """Candidate controls of the one-step LP (3.9)–(3.10) of a linear model.
+
+    For ``x+ = A x + B u + E w + c``, a state ``x`` and the target ``K_{i-1}`` held as a
+    union of polytopes ``P_j = {y : H_j y <= h_j}``, each member gives the LP
+
+        min ξ  over u in U, ξ >= 0
+        s.t.  G (A x + B u + E w + c - x_ref) <= ξ 1          for all w in W
+              H_j (A x + B u + E w + c) <= h_j - δ σ          for all w in W
+
+    with ``G y <= 1`` the gauge polytope (the terminal set T of (3.9), or its convex hull,
+    written around ``x_ref``), the worst case over the box W taken row by row exactly as
+    the support ``max_{w in W} M E w``, and ``σ`` the scale of each row
+    (``max(|H_k| . max|X|, |h_k|)``). The inward margin ``δ`` (:data:`ONE_STEP_MARGIN`)
+    exceeds HiGHS's feasibility tolerance tenfold, so that a solver tolerance cannot turn
+    an answer into a control that misses the target. When that LP is infeasible (the room
+    left by ``K_{i-1}`` at ``x`` is thinner than the margin), the control maximising the
+    smallest scaled slack is proposed, and, when that slack is positive, the LP again
+    with half of it as margin.
+
+    Every answer is only a candidate: the caller decides a step with a rigorous test of
+    ``f(x, u, W) ⊆ K_{i-1}`` (:class:`~casadi_cmpc.SetSequenceMPC` uses interval
+    arithmetic with outward rounding).
+
+    Parameters
+    ----------
+    model : Model
+        A linear model (``model.is_linear``).
+    gauge : Polytope or None
+        ``{y : G y <= g}`` with ``x_ref`` strictly inside (the objective (3.9)); None: no
+        objective (only the most interior control is proposed).
+    x_ref : ndarray, shape (n,)
+        Reference state of the gauge.
+    W : ndarray, shape (l, 2)
+        The disturbance box the rows must hold for (thin for a nominal controller).
+    """
+
+    def __init__(self, model: Any, gauge: Polytope | None, x_ref: np.ndarray,
+                 W: np.ndarray) -> None:
+        if not model.is_linear:
+            raise ModelError(f"the one-step LP (3.9)-(3.10) needs a linear model; model "
+                             f"'{model.name}' is nonlinear (use solver='ipopt' or 'sqp')")
+        A, B, E, c = model.linear_matrices()
+        n, m = model.n, model.m
+        self.A, self.B = A, B.reshape(n, m)
+        self.E = E.reshape(n, model.l)
+        self.c = np.asarray(c, dtype=float).reshape(n)
+        W = np.asarray(W, dtype=float).reshape(model.l, 2)
+        self._wc = 0.5 * W[:, 0] + 0.5 * W[:, 1]
+        self._wr = np.maximum(W[:, 1] - self._wc, self._wc - W[:, 0])
+        self.U_lo = np.asarray(model.U.lo, dtype=float)
+        self.U_hi = np.asarray(model.U.hi, dtype=float)
+        self.xmax = np.maximum(np.abs(model.X.lo), np.abs(model.X.hi))
+        self.x_ref = np.asarray(x_ref, dtype=float).reshape(n)
+        self.n, self.m = n, m
+        self.G: np.ndarray | None = None
+        if gauge is not None:
+            Gb = np.asarray(gauge.b, dtype=float) - np.asarray(gauge.A, dtype=float) @ self.x_ref
+            if Gb.size == 0 or not np.all(Gb > 0):
+                raise ValueError(
+                    "the gauge of (3.9) needs x_ref strictly inside its polytope (every "
+                    f"row b_k - a_k x_ref > 0; smallest {float(np.min(Gb, initial=0.0)):.3g}); "
+                    "pass gauge= a polytope around x_ref")
+            self.G = np.asarray(gauge.A, dtype=float) / Gb[:, None]
+
+    def _support(self, M: np.ndarray) -> np.ndarray:
+        """``max_{w in W} M E w`` per row (floating point; 0 without w)."""
+        if self.E.shape[1] == 0:
+            return np.zeros(M.shape[0])
+        ME = M @ self.E
+        return ME @ self._wc + np.abs(ME) @ self._wr
+
+    def xi(self, x: np.ndarray, u: np.ndarray) -> float:
+        """Gauge value of the successor, worst case over W (floating point)."""
+        if self.G is None:
+            return math.nan
+        y = self.A @ x + self.B @ u + self.c - self.x_ref
+        return float(np.max(self.G @ y + self._support(self.G)))
+
+    def _rows(self, x: np.ndarray, P: Polytope) -> tuple[np.ndarray, np.ndarray]:
+        """Scaled rows ``(H B / σ, (h - H (A x + c) - support) / σ)`` of one member."""
+        H = np.asarray(P.A, dtype=float)
+        h = np.asarray(P.b, dtype=float)
+        sig = np.maximum(np.abs(H) @ self.xmax, np.abs(h))
+        sig = np.where(sig > 0, sig, 1.0)
+        rhs = h - H @ (self.A @ x + self.c) - self._support(H)
+        return (H @ self.B) / sig[:, None], rhs / sig
+
+    def candidates(self, x: Any, members: list[Polytope]) -> list[OneStepCandidate]:
+        """Candidate controls toward the union of ``members``, best gauge value first.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+        members : list of Polytope
+            The polytopes of ``K_{i-1}`` (empty ones are skipped).
+
+        Returns
+        -------
+        list of OneStepCandidate
+            Possibly empty (every LP infeasible with no slack to spare).
+        """
+        x = np.asarray(x, dtype=float).reshape(self.n)
+        m = self.m
+        rows = [self._rows(x, P) for P in members
+                if isinstance(P, Polytope) and not P.is_empty()]
+        if not rows:
+            return []
+        out: list[OneStepCandidate] = []
+        lo = np.concatenate([self.U_lo, [0.0]])
+        hi = np.concatenate([self.U_hi, [np.inf]])
+
+        def lp_blocks(idx: list[int], margins: np.ndarray) -> Any:
+            """The LP (3.9)-(3.10) of each member in idx with its margin, one HiGHS call."""
+            RA, Rb, blk = [], [], []
+            gA = gb = None
+            if self.G is not None:
+                gA = np.hstack([self.G @ self.B, -np.ones((self.G.shape[0], 1))])
+                gb = -(self.G @ (self.A @ x + self.c - self.x_ref) + self._support(self.G))
+            for k, (j, d) in enumerate(zip(idx, margins, strict=True)):
+                HB, r = rows[j]
+                RA.append(np.hstack([HB, np.zeros((HB.shape[0], 1))]))
+                Rb.append(r - d)
+                blk.append(np.full(HB.shape[0], k))
+                if gA is not None:
+                    RA.append(gA)
+                    Rb.append(gb)
+                    blk.append(np.full(gA.shape[0], k))
+            C = np.zeros((len(idx), m + 1))
+            C[:, m] = 1.0
+            return block_lp(C, np.vstack(RA), np.concatenate(Rb), np.concatenate(blk), lo, hi)
+
+        def add(z: np.ndarray, j: int, how: str) -> None:
+            u = np.minimum(np.maximum(z[:m], self.U_lo), self.U_hi)
+            HB, r = rows[j]
+            out.append(OneStepCandidate(u=u, xi=self.xi(x, u), member=j, how=how,
+                                        slack=float(np.min(r - HB @ u, initial=1.0))))
+
+        idx = list(range(len(rows)))
+        failed = idx
+        if self.G is not None:
+            res = lp_blocks(idx, np.full(len(idx), ONE_STEP_MARGIN))
+            failed = []
+            for k, j in enumerate(idx):
+                if res.status[k] == OPTIMAL and np.isfinite(res.x[k]).all():
+                    add(res.x[k], j, "lp")
+                else:
+                    failed.append(j)
+        if failed:
+            # the most interior control: max t s.t. HB u + t <= r, t <= 1
+            RA, Rb, blk = [], [], []
+            for k, j in enumerate(failed):
+                HB, r = rows[j]
+                RA.append(np.hstack([HB, np.ones((HB.shape[0], 1))]))
+                Rb.append(r)
+                blk.append(np.full(HB.shape[0], k))
+            C = np.zeros((len(failed), m + 1))
+            C[:, m] = -1.0
+            res = block_lp(C, np.vstack(RA), np.concatenate(Rb), np.concatenate(blk),
+                           np.concatenate([self.U_lo, [-np.inf]]),
+                           np.concatenate([self.U_hi, [1.0]]))
+            again, margins = [], []
+            for k, j in enumerate(failed):
+                if res.status[k] != OPTIMAL or not np.isfinite(res.x[k]).all():
+                    continue
+                t = float(res.x[k, m])
+                if t < -ONE_STEP_MARGIN:  # this member is out of reach from x
+                    continue
+                add(res.x[k], j, "most interior")
+                if self.G is not None and t > _SLACK_FLOOR:
+                    again.append(j)
+                    margins.append(0.5 * min(t, 2 * ONE_STEP_MARGIN))
+            if again:
+                res = lp_blocks(again, np.asarray(margins))
+                for k, j in enumerate(again):
+                    if res.status[k] == OPTIMAL and np.isfinite(res.x[k]).all():
+                        add(res.x[k], j, "lp, smaller margin")
+        key = [(c.xi if np.isfinite(c.xi) else -c.slack) for c in out]
+        order = np.argsort(np.asarray(key, dtype=float), kind="stable")
+        return [out[i] for i in order]

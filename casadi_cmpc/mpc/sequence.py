@@ -37,6 +37,7 @@ from ..solvers.result import Certificate
 from ._fastcall import BufferedCall
 from ._stepcheck import NativeAfter
 from .contractive import MPCResult, _solver_options
+from .linear import OneStepLP
 from .spec import SetSequenceSpec
 
 __all__ = ["SetSequenceMPC"]
@@ -222,8 +223,12 @@ class SetSequenceMPC:
         A law other than that one is refused (ValueError): T's invariance was proven for its
         law only. With a sequence that holds no proven law (``assume_invariant=True``) the
         given law is applied and its answers say "not proven".
-    solver : {"ipopt", "sqp"}
-        Local solver of the one-step problem (built once, the state as parameter).
+    solver : {"ipopt", "sqp", "lp"}
+        Local solver of the one-step problem (built once, the state as parameter), or
+        ``"lp"``: the one-step LP (3.9)-(3.10) of a linear model along polytopic sets
+        (see the Notes; Q and R are then not used: the objective is the gauge of
+        ``gauge``). ``"lp"`` refuses a nonlinear model (ModelError) and a sequence held
+        as box unions (ValueError).
     robust : bool, optional
         Certify and optimise for all w in W (default: ``seq.info["robust"]``, else True
         when the model has a disturbance); False uses the centre of W.
@@ -251,6 +256,12 @@ class SetSequenceMPC:
         controls, two disturbances and a target of 7 rows (against 2-3 ms for
         ``"vertices"``); a stopped search keeps a certified bracket. Other keys or values
         are refused.
+    gauge : Polytope, optional
+        Only with ``solver="lp"``: the polytope ``{y : a_k y <= b_k}`` whose gauge around
+        ``x_ref``, ``max_k a_k (y - x_ref) / (b_k - a_k x_ref)``, the LP minimises at the
+        successor (the ``T x <= 1`` of (3.9)). Default: the terminal set ``K_0``, or the
+        convex hull of its polytopes when it is a union; ``x_ref`` must lie strictly
+        inside it (ValueError otherwise).
 
     Attributes
     ----------
@@ -289,6 +300,25 @@ class SetSequenceMPC:
     control is the minimax's. ``cost`` of the result stays the maximum over the vertices of W
     (a lower estimate here).
 
+    **Linear models, solver="lp" (thesis (3.9)-(3.10)).** At ``x`` in
+    ``K_i \\ K_{i-1}`` one LP per polytope of ``K_{i-1}`` (scipy's HiGHS, all in one call)
+    minimises the gauge ξ of the successor over ``u`` in U, with the target rows, and the
+    gauge rows, holding for every w in W (the support of ``E W`` taken row by row) and
+    moved inward by 1e-9 of each row's scale, ten times HiGHS's feasibility tolerance:
+    a solver tolerance cannot then turn an optimum on a facet into a control that misses
+    the target. Where the room left at ``x`` is thinner than that margin, the control with
+    the largest smallest slack is proposed, and the LP again with half of that slack as
+    margin (:class:`~casadi_cmpc.mpc.linear.OneStepLP`). Every answer is a candidate
+    only: the first, by gauge value, that passes the interval test
+    ``f(x, u, W) ⊆ K_{i-1}`` is applied (label "verified"); when none passes the step
+    says "unverified". ``cost`` of the result is the gauge value (worst case over W),
+    ``stats["lp"]`` lists the candidates.
+
+    **Linear models along polytopes, NLP solvers.** The NLP's target rows are moved
+    inward by 1e-6 of their scale; when the room at ``x`` is thinner, the tightened NLP
+    is infeasible and its answer misses the target. When no candidate passes the interval
+    test, the most interior control (an LP, as above) is proposed and tested too.
+
     **Sets held as box unions.** The solver minimises the cost over U; the control applied is
     the first of ``u*``, ``u_w + t (u* - u_w)`` (t = 3/4, 1/2, 1/4) and the stored proving
     control ``u_w`` that is certified to map ``x`` into ``K_{i-1}`` for all w.
@@ -297,7 +327,8 @@ class SetSequenceMPC:
     def __init__(self, model: Model, seq: Any, Q: Any = None, R: Any = None,
                  local_law: Any = None, solver: str = "ipopt", *, robust: bool | None = None,
                  x_ref: Any = None, solver_options: dict | None = None,
-                 minimax: str = "auto", minimax_options: dict | None = None) -> None:
+                 minimax: str = "auto", minimax_options: dict | None = None,
+                 gauge: Polytope | None = None) -> None:
         from ..control.controllable import _Target, _w_setup
 
         if not isinstance(model, Model):
@@ -311,8 +342,20 @@ class SetSequenceMPC:
             raise DimensionError(f"the sequence has dimension {sets[0].dim}; the model has "
                                  f"n = {model.n}")
         solver = str(solver).lower()
-        if solver not in ("ipopt", "sqp"):
-            raise ValueError(f"solver must be 'ipopt' or 'sqp'; got {solver!r}")
+        if solver not in ("ipopt", "sqp", "lp"):
+            raise ValueError(f"solver must be 'ipopt', 'sqp' or 'lp'; got {solver!r}")
+        if solver == "lp":
+            if not model.is_linear:
+                raise ModelError(
+                    f"solver='lp' solves the one-step LP (3.9)-(3.10) of a linear model; "
+                    f"model '{model.name}' is nonlinear (use solver='ipopt' or 'sqp')")
+            if not all(isinstance(M, Polytope) for S in sets for M in _members(S)):
+                raise ValueError("solver='lp' needs every set of the sequence held as "
+                                 "polytopes (e.g. from cm.linear_controllable_sets); this "
+                                 "sequence holds box unions (use solver='ipopt' or 'sqp')")
+            if solver_options:
+                raise ValueError("solver_options are options of casadi.nlpsol; solver='lp' "
+                                 "takes none")
         n, m = model.n, model.m
         self.model, self.seq, self.solver = model, seq, solver
         self.Q = weight_matrix(Q, n, "Q", definite=False, default=np.eye(n))
@@ -333,6 +376,9 @@ class SetSequenceMPC:
             self._rmax = max(M.A.shape[0] for S in sets for M in _members(S)
                              if isinstance(M, Polytope))
         self.minimax = self._resolve_minimax(minimax)
+        if self.minimax == "interval" and solver == "lp":
+            raise ValueError("minimax='interval' is for models not affine in w; solver='lp' "
+                             "takes the worst case over W exactly (use minimax='auto')")
         if self.minimax == "interval":
             self._mm_opts = _minimax_options(minimax_options, model.U, model.l)
         else:
@@ -341,7 +387,21 @@ class SetSequenceMPC:
                 warnings.warn("minimax_options are not used: the minimax is 'vertices'",
                               CmpcWarning, stacklevel=2)
             self._mm_opts = {}
-        self._nlp = self._build(solver_options or {})
+        # the one-step LP (3.9)-(3.10) (solver='lp'), and for a linear model along polytopes
+        # the most interior control, proposed when no other candidate is certified
+        self._lp: OneStepLP | None = None
+        self._lp_fallback: OneStepLP | None = None
+        if solver == "lp":
+            self._lp = OneStepLP(model, self._gauge(gauge), self.x_ref, self._Wbox)
+            self._nlp = None
+            self._costfun = None
+        else:
+            if gauge is not None:
+                raise ValueError("gauge is the objective of solver='lp'; the NLP solvers "
+                                 "minimise the quadratic cost")
+            self._nlp = self._build(solver_options or {})
+            if model.is_linear and self._polytopic:
+                self._lp_fallback = OneStepLP(model, None, self.x_ref, self._Wbox)
         if self.minimax == "interval":
             self._build_minimax()
         self.contract = np.eye(n)  # the whole state is driven to x_ref (for reports)
@@ -388,6 +448,22 @@ class SetSequenceMPC:
                 np.all(np.asarray(Wc[0]) <= need[:, 0])
                 and np.all(need[:, 1] <= np.asarray(Wc[1])))
         return ca.Function("law", [model.x], [expr]), proved
+
+    def _gauge(self, gauge: Polytope | None) -> Polytope:
+        """The gauge polytope of (3.9): the given one, else the terminal set T = K_0 (a
+        union: its convex hull)."""
+        if gauge is not None:
+            if not isinstance(gauge, Polytope):
+                raise TypeError(f"gauge must be a Polytope; got {type(gauge).__name__}")
+            if gauge.dim != self.model.n:
+                raise DimensionError(f"gauge has dimension {gauge.dim}; the model has "
+                                     f"n = {self.model.n}")
+            return gauge
+        members = [M for M in _members(self.seq.sets[0]) if not M.is_empty()]
+        if not members:
+            raise ValueError("the terminal set K_0 is empty: pass gauge= a polytope around "
+                             "x_ref for the objective (3.9)")
+        return members[0] if len(members) == 1 else members[0].hull(*members[1:])
 
     def _resolve_minimax(self, minimax: Any) -> str:
         if not isinstance(minimax, str) or minimax.lower() not in _MINIMAX_MODES:
@@ -598,7 +674,13 @@ class SetSequenceMPC:
         return self._target(i).inside(X, Ub, self._W1)
 
     def _cost(self, x: np.ndarray, u: np.ndarray) -> float:
-        """The cost's maximum over the vertices of W (the nominal w when not robust)."""
+        """The cost's maximum over the vertices of W (the nominal w when not robust); for
+        solver='lp' the gauge value of (3.9), worst case over W."""
+        lp = self._lp
+        if lp is not None:
+            wc = 0.5 * self._Wbox[:, 0] + 0.5 * self._Wbox[:, 1]
+            self._xnext = lp.A @ x + lp.B @ u + lp.E @ wc + lp.c
+            return lp.xi(x, u)
         call = self._step_calls().cost
         call.args[0][:] = x
         call.args[1][:] = u
@@ -622,6 +704,9 @@ class SetSequenceMPC:
         -------
         SetSequenceSpec
         """
+        if self._lp is not None:
+            raise NotImplementedError("the C export covers the NLP one-step solvers; build "
+                                      "the controller with solver='sqp' to export it")
         seq, n, r = self.seq, self._n, self._rmax
         rows = []
         for j in range(len(seq.sets) - 1 if r else 0):
@@ -729,6 +814,8 @@ class SetSequenceMPC:
         # ---------------- one-step problem into K_{lvl - 1}
         j = lvl - 1
         u_w = None if wit is None else np.asarray(wit[1], dtype=float).reshape(m)
+        if self._lp is not None:
+            return self._solve_lp(x, lvl, u_w, stats, t0)
         ts = time.perf_counter()
         u_opt = self._solve_nlp(x, j, stats, u_w)
         stats["solve_time"] = time.perf_counter() - ts
@@ -763,8 +850,17 @@ class SetSequenceMPC:
         # needed only when no candidate before it is certified
         if u_w is not None and not ok.any() and wit[0] <= lvl:
             ok[-1] = self._certify(x, C[-1:], wit[0] - 1)[0]
-        stats["verify_time"] = time.perf_counter() - tv
         k = np.flatnonzero(ok)
+        if k.size == 0 and self._lp_fallback is not None:
+            # the solver's answers are candidates only; along polytopes of a linear model
+            # the most interior control (an LP) is proposed when none of them passes
+            more = self._interior(x, j, stats)
+            if more:
+                cands += [(c.u, f"most interior control ({c.how}, LP)") for c in more]
+                C = np.vstack([C] + [c.u[None] for c in more])
+                ok = np.concatenate([ok, self._certify(x, C[-len(more):], j)])
+                k = np.flatnonzero(ok)
+        stats["verify_time"] = time.perf_counter() - tv
         if k.size == 0:
             u = C[-1] if u_w is not None else C[0]
             self._cost_bounds(x, u, mm, False, stats)
@@ -777,6 +873,55 @@ class SetSequenceMPC:
             u, src = self._toward_minimax(x, j, u, src, np.asarray(mm.u, dtype=float), stats)
         self._cost_bounds(x, u, mm, src == "interval minimax", stats)
         cert = Certificate("verified", True, f"f(x, u, w) in K_{j}" + self._w_claim(),
+                           f"interval evaluation at x with u from the {src}",
+                           {"candidates": int(C.shape[0]), "chosen": int(k[0]),
+                            "source": src})
+        return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc", Status.PROVED, t0)
+
+    def _interior(self, x: np.ndarray, j: int, stats: dict) -> list[Any]:
+        """Candidates of the fallback LP toward ``K_j`` (none unless K_j is polytopes)."""
+        members = _members(self.seq.sets[j])
+        if self._lp_fallback is None or not all(isinstance(M, Polytope) for M in members):
+            return []
+        got = self._lp_fallback.candidates(x, members)
+        stats["interior_lp"] = [{"how": c.how, "member": c.member, "slack": c.slack}
+                                for c in got]
+        return got
+
+    def _solve_lp(self, x: np.ndarray, lvl: int, u_w: np.ndarray | None, stats: dict,
+                  t0: float) -> MPCResult:
+        """The one-step LP (3.9)-(3.10) at ``x`` in ``K_lvl \\ K_(lvl-1)``: candidates
+        from :class:`OneStepLP`, the first (smallest gauge value) that passes the interval
+        test ``f(x, u, W) ⊆ K_(lvl-1)`` is applied."""
+        j = lvl - 1
+        m = self._m
+        ts = time.perf_counter()
+        got = self._lp.candidates(x, _members(self.seq.sets[j]))
+        stats["solve_time"] = time.perf_counter() - ts
+        stats["lp"] = [{"how": c.how, "member": c.member, "xi": c.xi, "slack": c.slack}
+                       for c in got]
+        cands = [(c.u, f"one-step LP (3.9)-(3.10), {c.how}") for c in got]
+        if u_w is not None:
+            cands.append((u_w, "stored control"))
+        claim = f"f(x, u, w) in K_{j}" + self._w_claim()
+        if not cands:
+            cert = Certificate("undecided", None, claim,
+                               "every one-step LP was infeasible for HiGHS (no room at x)")
+            return self._done(x, np.full(m, np.nan), np.nan, lvl, cert, stats, "mpc",
+                              Status.NUMERICAL, t0)
+        C = np.asarray([c for c, _ in cands], dtype=float).reshape(-1, m)
+        tv = time.perf_counter()
+        ok = self._certify(x, C, j)
+        stats["verify_time"] = time.perf_counter() - tv
+        k = np.flatnonzero(ok)
+        if k.size == 0:
+            u = C[0]
+            cert = Certificate("unverified", None, claim,
+                               "no candidate control could be certified")
+            return self._done(x, u, self._cost(x, u), lvl, cert, stats, "mpc",
+                              Status.UNDECIDED, t0)
+        u, src = C[k[0]], cands[k[0]][1]
+        cert = Certificate("verified", True, claim,
                            f"interval evaluation at x with u from the {src}",
                            {"candidates": int(C.shape[0]), "chosen": int(k[0]),
                             "source": src})
