@@ -73,10 +73,17 @@ def _rows_inclusion(model: Model, A: np.ndarray) -> Any:
     F = cache.get(key)
     if F is None:
         H = ca.SX.sym("H", A.shape[0], model.n)
-        g = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
-                        [ca.mtimes(H, model.f)])
-        F = cache[key] = InclusionFunction(ParamFunction(g, 3, A.ravel(order="F")),
-                                           "centered")
+        if model._exact_f is None:  # f as given: its literals are the model's
+            g = ca.Function("target_rows", [model.x, model.u, model._w_sym, H],
+                            [ca.mtimes(H, model.f)])
+            F = InclusionFunction(ParamFunction(g, 3, A.ravel(order="F")), "centered")
+        else:  # closed loop or validated ODE: the exact interval source, with its parameters
+            expr, P, Pb = model.interval_expr()
+            g = ca.Function("target_rows", [model.x, model.u, model._w_sym,
+                                            ca.vertcat(ca.vec(H), P)], [ca.mtimes(H, expr)])
+            vals = np.vstack([np.repeat(A.ravel(order="F")[:, None], 2, axis=1), Pb])
+            F = InclusionFunction(ParamFunction(g, 3, vals), "centered")
+        cache[key] = F
         while len(cache) > 64:
             cache.popitem(last=False)
     else:
@@ -113,7 +120,8 @@ class _Target:
             else:
                 self.zonos.append(S)
         self.boxes = Paving(inner=np.concatenate(boxes)) if boxes else None
-        self.F = inclusion(model.function, "centered") if (boxes or self.zonos) else None
+        self.F = (inclusion(model.interval_map("xuw"), "centered") if (boxes or self.zonos)
+                  else None)
         self.empty = not (self.polys or boxes or self.zonos)
 
     def images(self, X: np.ndarray, U: np.ndarray, W: np.ndarray
@@ -290,41 +298,107 @@ class OneStepSet(SetResult):
     status : Status
         PROVED when the search ran to completion (the boundary boxes are narrower than eps),
         BUDGET when a limit stopped it.
+    pieces : PolytopeUnion or None
+        For ``method="affine_state"`` (thesis Alg 6.4) the set is this union of polytopes,
+        each proven in the set with its control ``witness[k]`` (then ``witness`` has one
+        row per piece and the paving holds no box: its domain only).
+    details : dict or None
+        Method-specific data. Affine-state method: the x_NL grid ``boxes`` (N, p, 2), per
+        piece its ``box`` index, the target ``member`` it reaches and the offsets ``c`` of
+        its x_L part ``{x_L in D_lin : rows[member] x_L <= c}``, the nonlinear and linear
+        state indices ``nl`` and ``lin``.
     """
 
     witness: np.ndarray | None = None
     semantics: str = ROBUST
     target: Any = None
+    pieces: PolytopeUnion | None = None
+    details: dict | None = None
+
+    @property
+    def verdict(self) -> str:
+        """What the result proves, in words (see :attr:`SetResult.verdict`; for the
+        affine-state method: the number of proven polytope pieces)."""
+        if self.pieces is None:
+            return super().verdict
+        k = len(self.pieces)
+        return (f"{k} polytope piece{'s' if k != 1 else ''} proven ({self.semantics})" if k
+                else "no polytope piece proven")
+
+    def _repr_note(self) -> str | None:
+        if self.pieces is None:
+            return super()._repr_note()
+        return None if len(self.pieces) else self.verdict
 
     def _repr_parts(self) -> list[str]:
+        if self.pieces is not None:
+            return [f"pieces={len(self.pieces)}", f"semantics={self.semantics!r}"]
         p = self.paving
         return [f"inner={p.n_inner}", f"boundary={p.n_boundary}",
                 f"semantics={self.semantics!r}"]
 
     def area(self, view: str = "inner") -> float:
-        """Area (volume) of the inner boxes (``view="outer"``: inner and boundary)."""
+        """Area (volume) of the inner boxes (``view="outer"``: inner and boundary); of the
+        union of the pieces for the affine-state method (``view="inner"`` only)."""
+        if self.pieces is not None:
+            if view != "inner":
+                raise ValueError("the affine-state method gives an inner approximation only; "
+                                 "use view='inner'")
+            from .affine_state import union_volume
+
+            return union_volume(self.details or {})
         return self.paving.volume(view=view)
 
     def contains(self, points: Any) -> np.ndarray | bool:
-        """Whether points lie in an inner box (proven members of the set)."""
+        """Whether points lie in an inner box (proven members of the set), or in a piece
+        for the affine-state method."""
+        if self.pieces is not None:
+            if not len(self.pieces):
+                P = np.atleast_2d(np.asarray(points, dtype=float))
+                out = np.zeros(P.shape[0], dtype=bool)
+                return out if np.ndim(points) > 1 else bool(out[0])
+            return self.pieces.contains(points)
         return self.paving.contains(points, view="inner")
 
     def control(self, x: Any) -> np.ndarray | None:
-        """The stored proving control of the first inner box containing ``x`` (n,), or None
-        when ``x`` lies in no inner box or the method stores no control."""
+        """The stored proving control of the first inner box (or piece) containing ``x``
+        (n,), or None when ``x`` lies in none or the method stores no control."""
         if self.witness is None:
             return None
         x = np.asarray(x, dtype=float).reshape(-1)
+        if self.pieces is not None:
+            for k, P in enumerate(self.pieces):
+                if P.contains(x):
+                    return self.witness[k].copy()
+            return None
         I = self.paving.inner
         hit = np.flatnonzero(((I[..., 0] <= x) & (x <= I[..., 1])).all(axis=1))
         return None if hit.size == 0 else self.witness[hit[0]].copy()
 
     def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), model: Any = None,
              **kw: Any) -> Any:
-        """Draw the paving (inner green, boundary yellow). The axes are labelled with the
-        model's state names and units when ``model`` is given, else ``x1, x2``."""
+        """Draw the paving (inner green, boundary yellow), or the pieces of the affine-state
+        method. The axes are labelled with the model's state names and units when ``model``
+        is given, else ``x1, x2``."""
         from ..plot import axis_label, variable_labels
 
+        if self.pieces is not None:
+            import matplotlib.pyplot as plt
+
+            if ax is None:
+                _, ax = plt.subplots()
+            kw.setdefault("facecolor", "tab:green")
+            kw.setdefault("alpha", 0.5)
+            if len(self.pieces):
+                self.pieces.plot(ax=ax, dims=dims, **kw)
+            D = self.paving.domain
+            if D is not None:
+                ax.set_xlim(D.lo[dims[0]], D.hi[dims[0]])
+                ax.set_ylim(D.lo[dims[1]], D.hi[dims[1]])
+            names, units = variable_labels(model, "x", d=self.paving.dim)
+            ax.set_xlabel(axis_label(names[dims[0]], units[dims[0]]))
+            ax.set_ylabel(axis_label(names[dims[1]], units[dims[1]]))
+            return ax
         ax = self.paving.plot(ax=ax, dims=dims, **kw)
         names, units = variable_labels(model, "x", d=self.paving.dim)
         ax.set_xlabel(axis_label(names[dims[0]], units[dims[0]]))
@@ -483,11 +557,25 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     if not (np.isfinite(model.U.lo).all() and np.isfinite(model.U.hi).all()):
         raise ValueError(f"U must be bounded; got {model.U}")
     meth = str(method).lower()
-    if meth not in ("auto", "general", "modal"):
-        raise ValueError(f"unknown method '{method}'; valid methods: auto, general, modal")
+    if meth not in ("auto", "general", "modal", "affine_state"):
+        raise ValueError(f"unknown method '{method}'; valid methods: auto, general, modal, "
+                         "affine_state")
     eps = positive_eps(eps)
     D = _domain(model, X)
     obs = _as_obstacles(obstacles, model.n)
+    if meth == "auto":
+        from .affine_state import is_polytopic
+
+        meth = ("affine_state" if model.has_affine_state_part and not obs
+                and options is None and is_polytopic(target) else "general")
+    if meth == "affine_state":
+        if obs:
+            raise ValueError("method='affine_state' does not take obstacles; use "
+                             "method='general'")
+        if options:
+            raise ValueError("options are for method='modal'")
+        return _affine(model, target, eps, D, robust=robust, u_eps=u_eps, relative=relative,
+                       max_boxes=max_boxes, time_limit=time_limit)
     if meth == "modal":
         return _modal(model, target, eps, D, robust, relative, max_boxes, time_limit,
                       progress, options, obs, executor=executor)
@@ -502,10 +590,58 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
     pav = Paving(inner=r["inner"], boundary=r["boundary"], outside=r["outer"], domain=D,
                  n_discarded=r["n_discarded"])
     status, msg = _what_was_proven(r["status"], r["message"], pav, r["semantics"])
+    msg += f"; {about_model(model, robust)}"
     return OneStepSet(status=status, message=msg, method="general (Alg 4.6/6.1)",
                       nit=r["levels"], n_boxes=r["n_classified"], elapsed=r["elapsed"],
                       paving=pav, witness=r["witness"], semantics=r["semantics"],
                       target=target, n_pairs=r["n_pairs"])
+
+
+def _affine(model: Model, target: Any, eps: float, D: Box, *, robust: bool, u_eps: float,
+            relative: bool, max_boxes: int, time_limit: float | None) -> OneStepSet:
+    """The one-step set by the affine-state method (Alg 6.4) as a :class:`OneStepSet`."""
+    from .affine_state import affine_state_pieces, check_members
+
+    members = check_members(target, model.n)
+    _, _, semantics = _w_setup(model, robust, None)
+    if not (0 < u_eps <= 1):
+        raise ValueError(f"u_eps must be in (0, 1]; got {u_eps}")
+    r = affine_state_pieces(model, members, D, eps, robust=robust, u_eps=float(u_eps),
+                            relative=relative, max_pairs=int(max_boxes),
+                            time_limit=time_limit)
+    K = len(r["pieces"])
+    nl = list(r["nl"])
+    about = f"{about_model(model, robust)}; target of {len(members)} polytope(s)"
+    msg = (f"{K} polytope pieces proven ({semantics}); {about}; x_NL = states {nl} gridded "
+           f"into {r['boxes'].shape[0]} boxes")
+    if r["complete"]:
+        status = Status.PROVED if K else Status.UNDECIDED
+        if not K:
+            msg = f"no polytope piece proven ({semantics}); {about}"
+    else:
+        status = Status.BUDGET
+        msg += "; stopped by the budget (the pieces found are proven)"
+    pav = Paving(inner=np.zeros((0, model.n, 2)), domain=D)
+    return OneStepSet(status=status, message=msg, method="affine state (Alg 6.4)",
+                      nit=1, n_boxes=int(r["boxes"].shape[0]), elapsed=r["seconds"],
+                      paving=pav, witness=r["witness"], semantics=semantics, target=target,
+                      n_pairs=int(r["n_pairs"]), pieces=PolytopeUnion(r["pieces"],
+                                                                      dim=model.n),
+                      details={k: r[k] for k in ("boxes", "box", "member", "rows", "offsets",
+                                                 "D_lin", "nl", "lin")})
+
+
+def about_model(model: Model, robust: bool) -> str:
+    """What a set of this module is a claim about: the model (and what its map is: a
+    discrete model, the Euler/RK4 map of an ODE, or the validated sampled-data ODE) and the
+    disturbances it covers."""
+    if model.W is None:
+        dist = "no disturbance"
+    elif robust:
+        dist = f"every w in W = {model.W}"
+    else:
+        dist = f"w at the centre of W = {model.W} only (nominal)"
+    return f"about model '{model.name}' ({model.discretisation}), {dist}"
 
 
 def _what_was_proven(status: Status, message: str, pav: Paving, semantics: str
@@ -551,6 +687,11 @@ def _modal_rows(model: Model, A: np.ndarray, robust: bool) -> tuple[ca.Function,
         ``(x, u[, w'])`` -> ``A f`` of shape (r, 1), with ``w'`` = ``(w, constants of f)``;
         the box of ``w'`` (None without ``w'``).
     """
+    if model._exact_f is not None:
+        raise ModelError(
+            f"method='modal' works on the expressions of f, and model '{model.name}' is "
+            f"{model.discretisation}: its proofs need the exact interval source (use "
+            "method='general')")
     f = model.f
     const = [j for j in range(model.n) if f[j].is_constant()]
     s = ca.SX.sym("s", len(const))
@@ -609,6 +750,7 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
         pav.status, pav.message, pav.levels, pav.n_classified, pav.n_pairs = (
             status, message, levels, ncl, npairs)
     status, msg = _what_was_proven(pav.status, pav.message, pav, sem)
+    msg += f"; {about_model(model, robust)}"
     return OneStepSet(status=status, message=msg, method="modal (Alg 5.2)",
                       nit=pav.levels, n_boxes=pav.n_classified,
                       elapsed=time.perf_counter() - t0, paving=pav, witness=None,
@@ -725,7 +867,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                       until: Any = None, max_boxes: int = 2_000_000,
                       time_limit: float | None = None, progress: bool | None = None,
                       checkpoint: str | os.PathLike[str] | None = None,
-                      executor: Any = None) -> Any:
+                      executor: Any = None, method: str = "general") -> Any:
     """The sequence ``K_0 = T, K_{i+1} = K(X, K_i)`` of (robust) controllable sets (Alg 4.6,
     6.1, (6.8)), each a proven inner approximation, to convergence.
 
@@ -797,6 +939,19 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         with less than about 0.2 s of work run in this process, so small sequences gain
         nothing. Not part of a checkpoint's key: a run may resume with other workers.
 
+    method : {"general", "affine_state"}
+        ``"general"``: the nested state × control search of :func:`one_step_set` at every
+        step. ``"affine_state"`` (thesis §6.2, Alg 6.4-6.6; models with an affine state
+        part, :attr:`Model.nonlinear_states` a strict subset): every step grids only the
+        nonlinear states and U, its one-step set is a union of polytopes, and ``P_i`` is
+        one polytope proven inside that union and ``P_{i-1}`` (``polytopic_method``;
+        ``polytopic`` is implied). A state of ``P_i`` outside ``P_{i-1}`` reaches
+        ``P_{i-1}`` in one step for all w; the sets need not be nested (``level(x)`` is the
+        smallest i with x in ``P_i``). The recursion stops when a polytope grows by less
+        than 0.1 % in volume (``converged_at``). ``obstacles``, ``checkpoint`` and
+        ``executor`` are for ``"general"``; ``max_boxes`` bounds the (x_NL box, control)
+        pairs of a step.
+
     Returns
     -------
     SetSequence
@@ -841,6 +996,23 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     D = _domain(model, X)
     obs = _as_obstacles(obstacles, model.n)
     pts = None if until is None else np.atleast_2d(np.asarray(until, dtype=float))
+    meth = str(method).lower()
+    if meth not in ("general", "affine_state"):
+        raise ValueError(f"unknown method '{method}'; valid methods: general, affine_state")
+    if meth == "affine_state":
+        from .affine_state import affine_state_sequence
+
+        if obs or checkpoint is not None or executor is not None:
+            raise ValueError("obstacles, checkpoint and executor are for method='general'")
+        if not 0 < u_eps <= 1:
+            raise ValueError(f"u_eps must be in (0, 1]; got {u_eps}")
+        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
+        return affine_state_sequence(
+            model, T, eps, robust=robust, polytopic_method=polytopic_method,
+            max_steps=max_steps,
+            terminal_info={"terminal_certificate": cert.label, **_terminal_info(model, cert)},
+            D=D, u_eps=float(u_eps), relative=False, until=pts, max_pairs=int(max_boxes),
+            time_limit=time_limit, progress=progress)
     t0 = time.perf_counter()
     _, wpts, semantics = _w_setup(model, robust, w_points)
     ck = None if checkpoint is None else Checkpoint(checkpoint)
@@ -859,6 +1031,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         done, saved_frontier = ck.resume_state(saved, model.n)
     seq = SetSequence(sets=[T], info={
         "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
+        "about": about_model(model, robust),
         "polytopic": bool(polytopic), "terminal_certificate": tinfo["terminal_certificate"],
         "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo})
     frontier = D.as_array()[None]

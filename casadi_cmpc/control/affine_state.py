@@ -1,0 +1,495 @@
+"""One-step controllable sets of models with an affine state part (thesis §6.2, Alg 6.4-6.6).
+
+For ``x+ = A x + g(x_NL, u, w)``, where only the states ``x_NL``
+(:attr:`~casadi_cmpc.Model.nonlinear_states`) enter nonlinearly, the one-step set of a
+polytope ``T = {y : H y <= h}`` splits into polytopes: for a box ``B`` of ``x_NL`` and a
+control ``u``, every ``x`` with ``x_NL in B`` and
+
+    H A x <= h - sup { H g(x_NL, u, w) : x_NL in B, w in W }
+
+reaches T under ``u`` for every w. Only ``x_NL`` and ``U`` are gridded (Alg 6.4): the cost
+grows with the number of nonlinear states and controls, not with n. The union of these
+pieces is approximated by one polytope with Alg 6.2 or 6.5
+(:func:`~casadi_cmpc.inner_polytope`), and the recursion over such polytopes gives the
+sequence of controllable sets (Alg 6.6's sets).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import DimensionError, ModelError
+from ..model import Model
+from ..sets._zono_num import imatmul
+from ..sets.box import Box
+from ..sets.polytope import Polytope, PolytopeUnion
+
+__all__ = ["affine_state_pieces", "union_volume"]
+
+#: largest number of control candidates per x_NL box
+MAX_CONTROLS = 4096
+#: pairs (x_NL box, control) evaluated in one batch
+CHUNK = 65536
+
+
+def _structure(model: Model, D: Box) -> tuple[tuple[int, ...], tuple[int, ...], np.ndarray]:
+    """(nonlinear states, linear states, interval enclosure (n, n_L, 2) of the constant
+    columns of A = df/dx_L). The enclosure is the interval Jacobian over the domain: a
+    constant column is enclosed (outward) whatever the box."""
+    nl = tuple(model.nonlinear_states)
+    lin = tuple(model.linear_states)
+    if not lin:
+        raise ModelError(
+            f"model '{model.name}' has no state that enters f only linearly (nonlinear "
+            f"states: {list(nl)}): method='affine_state' needs f = A x + g(x_NL, u, w); "
+            "use method='general'")
+    Wb = model.W.as_array()[None] if model.W is not None else None
+    J = np.asarray(model.jacobian_inclusion("x")(D.as_array()[None], model.U.as_array()[None],
+                                                 Wb), dtype=float)[0]  # (n, n, 2)
+    A = J[:, list(lin), :]
+    if not np.isfinite(A).all():
+        raise ModelError("the constant columns of A (df/dx of the linear states) have no "
+                         "finite enclosure")
+    return nl, lin, A
+
+
+def _grid_boxes(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """Regular grid of boxes (N, d, 2) on [lo, hi]: per component ``2^k`` cells, the first
+    power of two with cells at most ``widths`` wide (the boxes a bisection to that
+    tolerance reaches; neighbouring boxes share their edges); one box (1, 0, 2) for d = 0."""
+    d = lo.size
+    if d == 0:
+        return np.zeros((1, 0, 2))
+    edges = []
+    for j in range(d):
+        k = 1  # the cells a bisection reaches: halve while wider than the tolerance
+        while (hi[j] - lo[j]) / k > widths[j]:
+            k *= 2
+        e = lo[j] + (hi[j] - lo[j]) * np.arange(k + 1) / k
+        e[0], e[-1] = lo[j], hi[j]
+        edges.append(e)
+    idx = np.stack(np.meshgrid(*[np.arange(e.size - 1) for e in edges], indexing="ij"),
+                   axis=-1).reshape(-1, d)
+    out = np.empty((idx.shape[0], d, 2))
+    for j, e in enumerate(edges):
+        out[:, j, 0] = e[idx[:, j]]
+        out[:, j, 1] = e[idx[:, j] + 1]
+    return out
+
+
+def _controls(U: Box, u_eps: float) -> np.ndarray:
+    """Candidate controls (C, m): per component the midpoints of the cells of every level of
+    the dyadic bisection of U down to cells of width at most ``u_eps`` times U's width
+    (the controls a bisection of U would try: 1 + 2 + 4 + ... values), combined."""
+    lo, hi = U.lo, U.hi
+    levels = max(0, math.ceil(math.log2(1.0 / u_eps) - 1e-9))
+    axes = []
+    for j in range(lo.size):
+        vals = [lo[j] + (hi[j] - lo[j]) * (np.arange(2 ** L) + 0.5) / 2 ** L
+                for L in range(levels + 1)]
+        axes.append(np.unique(np.concatenate(vals)))
+    total = int(np.prod([a.size for a in axes]))
+    if total > MAX_CONTROLS:
+        raise ValueError(f"u_eps = {u_eps} gives {total} candidate controls per box (more than "
+                         f"{MAX_CONTROLS}); choose a larger u_eps")
+    if lo.size == 0:
+        return np.zeros((1, 0))
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, lo.size)
+
+
+def _member_rows(members: list[Polytope], A: np.ndarray, D_lin: Box
+                 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per target member ``H y <= h``: ``(H, h, M, s)`` with ``M`` (t, n_L) the midpoint of
+    the interval product ``H A`` and ``s`` (t,) an upper bound of
+    ``sup_{x_L in D_L} |(H A - M) x_L|`` (radius of the product times the largest |x_L|):
+    for every x_L of D_L, ``(H A) x_L <= M x_L + s`` in exact arithmetic."""
+    xmax = np.maximum(np.abs(D_lin.lo), np.abs(D_lin.hi))
+    out = []
+    for P in members:
+        H = np.asarray(P.A, dtype=float)
+        h = np.asarray(P.b, dtype=float)
+        lo, hi = imatmul(H, H, A[..., 0], A[..., 1])  # (t, n_L), outward
+        M = 0.5 * lo + 0.5 * hi
+        rad = np.nextafter(np.maximum(hi - M, M - lo), np.inf)
+        s = (rad * xmax).sum(axis=1)
+        # nonnegative terms: a relative margin covers the rounding of products and sum
+        s = np.nextafter(s * (1.0 + 4.0 * (xmax.size + 2) * np.finfo(float).eps)
+                         + np.finfo(float).tiny, np.inf)
+        out.append((H, h, M, s))
+    return out
+
+
+def _undominated(C: np.ndarray) -> np.ndarray:
+    """Rows of C (k, t) not dominated by another (``C[j] >= C[i]`` everywhere, strictly
+    somewhere, or equal with a smaller index): with equal normals, the piece of a dominated
+    offset lies inside the piece of the dominating one. Returns a bool mask (k,)."""
+    ge = (C[None, :, :] >= C[:, None, :]).all(axis=2)  # ge[i, j]: C[j] >= C[i]
+    gt = (C[None, :, :] > C[:, None, :]).any(axis=2)
+    k = C.shape[0]
+    earlier = np.tril(np.ones((k, k), dtype=bool), -1)  # earlier[i, j]: j < i
+    dom = ge & (gt | earlier)
+    np.fill_diagonal(dom, False)
+    return ~dom.any(axis=1)
+
+
+def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
+    """Indices of the candidates worth keeping among the x_L slices
+    ``{x_L in D_L : M x_L <= C[k]}`` of one x_NL box (C: (k, t)): those with interior, less
+    those inside another kept slice. With one linear state the slices are intervals,
+    computed exactly in floating point and pruned by containment; otherwise a slice is
+    kept when its Chebyshev ball is not empty (LP) and its offsets are not dominated. Only
+    the size of the approximation depends on this choice (a dropped slice is never
+    needed for soundness)."""
+    ok = np.isfinite(C).all(axis=1)
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return idx
+    if M.shape[1] == 1:
+        a = M[:, 0]
+        Ck = C[idx]
+        if np.any((a == 0)[None, :] & (Ck < 0), axis=1).any():
+            idx = idx[~np.any((a == 0)[None, :] & (Ck < 0), axis=1)]
+            Ck = C[idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = Ck / np.where(a == 0, 1.0, a)[None, :]
+        hi = np.minimum(float(D_lin.hi[0]), np.where(a > 0, q, np.inf).min(axis=1))
+        lo = np.maximum(float(D_lin.lo[0]), np.where(a < 0, q, -np.inf).max(axis=1))
+        good = hi > lo
+        idx, lo, hi = idx[good], lo[good], hi[good]
+        if idx.size <= 1:
+            return idx
+        inside = (lo[None, :] <= lo[:, None]) & (hi[:, None] <= hi[None, :])  # i in j
+        same = (lo[None, :] == lo[:, None]) & (hi[None, :] == hi[:, None])
+        k = idx.size
+        inside &= ~same | np.tril(np.ones((k, k), dtype=bool), -1)  # a copy: keep the first
+        np.fill_diagonal(inside, False)
+        return idx[~inside.any(axis=1)]
+    idx = idx[_undominated(C[idx])]
+    n_l = M.shape[1]
+    I = np.eye(n_l)
+    keep = [k for k in idx if Polytope(np.vstack([M, I, -I]),
+                                       np.concatenate([C[k], D_lin.hi, -D_lin.lo])
+                                       ).is_full_dimensional()]
+    return np.asarray(keep, dtype=int)
+
+
+def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: float, *,
+                        robust: bool, u_eps: float, relative: bool, max_pairs: int,
+                        time_limit: float | None) -> dict[str, Any]:
+    """The pieces of Alg 6.4 for a target union of polytopes ``members``.
+
+    Parameters
+    ----------
+    model : Model
+        With at least one linear state.
+    members : list of Polytope
+        Target ``T = ∪ {y : H_j y <= h_j}`` in the state space (n).
+    D : Box
+        State domain (n): the pieces lie in it.
+    eps : float
+        Width of the grid cells of ``x_NL`` (relative to D's widths when ``relative``).
+    robust : bool
+        All w of W (True) or w at the centre of W.
+    u_eps : float
+        Candidate controls: the centres of a grid of U with cells of width ``u_eps`` times
+        U's width.
+    max_pairs, time_limit
+        Budget: (x_NL box, control) pairs evaluated, seconds; a stopped run keeps the
+        pieces found so far (all proven).
+
+    Returns
+    -------
+    dict
+        ``pieces`` list of Polytope (n), ``witness`` (K, m), ``member`` (K,) index of the
+        member each piece reaches, ``box`` (K,) index of its x_NL box in ``boxes``
+        (N, p, 2), ``slices`` list of Polytope (n_L) (the piece's x_L part), ``nl``,
+        ``lin``, ``n_pairs``, ``complete`` (bool), ``seconds``.
+
+    Notes
+    -----
+    **Claim of a piece.** Its stored rows are ``M x_L <= c`` (``M`` the midpoint of
+    ``H A``), ``x_NL`` in its box and ``x`` in D. For every x satisfying them in exact
+    arithmetic and every w (of W, or the centre of W), ``H f(x, u, w) <= h`` with u its
+    witness: ``H f = (H A) x_L + H g(x_NL, u, w)``; ``(H A) x_L <= M x_L + s`` on D;
+    ``H g <= b`` where ``b`` is the upper bound of the outward-rounded centered inclusion
+    of the rows ``H f`` over the x_NL box × {u} × W with ``x_L = 0`` (f = A x + g, so
+    f at x_L = 0 is g); and ``c = h - b - s`` is rounded downward.
+    """
+    t0 = time.perf_counter()
+    from .controllable import _rows_inclusion
+
+    n = model.n
+    nl, lin, A = _structure(model, D)
+    nl_l, lin_l = list(nl), list(lin)
+    D_lin = Box(D.lo[lin_l], D.hi[lin_l])
+    rows = _member_rows(members, A, D_lin)
+    width = eps * np.where(D.diam > 0, D.diam, 1.0) if relative else np.full(n, eps)
+    boxes = _grid_boxes(D.lo[nl_l], D.hi[nl_l], width[nl_l])
+    ctrl = _controls(model.U, u_eps)
+    C = ctrl.shape[0]
+    Wb = _semantics(model, robust)[0][None]  # W, or the thin box at its centre, (1, l, 2)
+    Ub = np.stack([ctrl, ctrl], axis=-1)  # (C, m, 2)
+    pieces: list[Polytope] = []
+    offs: list[np.ndarray] = []
+    wit: list[np.ndarray] = []
+    mem: list[int] = []
+    bix: list[int] = []
+    n_pairs = 0
+    complete = True
+    per_chunk = max(1, CHUNK // C)
+    fulls = []
+    for _, _, M, _ in rows:
+        t = M.shape[0]
+        Af = np.zeros((t + 2 * n, n))
+        Af[:t, lin_l] = M
+        Af[t:t + n] = np.eye(n)
+        Af[t + n:] = -np.eye(n)
+        fulls.append(Af)
+    for start in range(0, boxes.shape[0], per_chunk):
+        if n_pairs >= max_pairs or (time_limit is not None
+                                    and time.perf_counter() - t0 > time_limit):
+            complete = False
+            break
+        B = boxes[start:start + per_chunk]
+        nb = B.shape[0]
+        X = np.zeros((nb, C, n, 2))
+        X[:, :, nl_l, :] = B[:, None, :, :]
+        X = X.reshape(nb * C, n, 2)
+        U = np.broadcast_to(Ub[None], (nb, C) + Ub.shape[1:]).reshape(nb * C, -1, 2)
+        N = nb * C
+        n_pairs += N
+        for j, (H, h, M, s) in enumerate(rows):
+            Afull = fulls[j]
+            F = _rows_inclusion(model, H)
+            R = np.asarray(F.evaluate_unchecked([X, np.ascontiguousarray(U), Wb], N)[0])
+            ub = R[..., 1]  # (N, t)
+            with np.errstate(invalid="ignore", over="ignore"):
+                cc = np.nextafter(np.nextafter(h - ub, -np.inf) - s, -np.inf)
+            cc = np.where(np.isnan(cc), -np.inf, cc).reshape(nb, C, -1)
+            for i in range(nb):
+                keep = _useful(M, cc[i], D_lin)
+                box = B[i]
+                lo_b, hi_b = D.lo.copy(), D.hi.copy()
+                lo_b[nl_l], hi_b[nl_l] = box[:, 0], box[:, 1]
+                for k in keep:
+                    pieces.append(Polytope(Afull, np.concatenate([cc[i, k], hi_b, -lo_b])))
+                    offs.append(cc[i, k].copy())
+                    wit.append(ctrl[k])
+                    mem.append(j)
+                    bix.append(start + i)
+    return {"pieces": pieces, "offsets": offs, "rows": [r[2] for r in rows],
+            "D_lin": D_lin,
+            "witness": np.asarray(wit, dtype=float).reshape(len(wit), model.m),
+            "member": np.asarray(mem, dtype=int), "box": np.asarray(bix, dtype=int),
+            "boxes": boxes, "nl": nl, "lin": lin, "n_pairs": n_pairs,
+            "complete": complete, "seconds": time.perf_counter() - t0}
+
+
+def inner_boxes(details: dict[str, Any], D: Box) -> np.ndarray | None:
+    """With one linear state: the union of the pieces as boxes (N, n, 2), each inside it
+    (per x_NL box, the union of its x_L intervals, each interval rounded inward, merged
+    where they overlap or touch). None with several linear states (the pieces are then
+    not boxes)."""
+    D_lin = details["D_lin"]
+    if D_lin.dim != 1:
+        return None
+    boxes, box_index = details["boxes"], details["box"]
+    nl, lin = list(details["nl"]), list(details["lin"])
+    out = []
+    for b in np.unique(box_index):
+        iv = []
+        for k in np.flatnonzero(box_index == b):
+            a = details["rows"][details["member"][k]][:, 0]
+            c = details["offsets"][k]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                q = c / np.where(a == 0, 1.0, a)
+            # {x : a x <= c}: x <= c/a for a > 0, x >= c/a for a < 0, rounded inward
+            hi = min(float(D_lin.hi[0]), float(np.min(np.nextafter(q[a > 0], -np.inf),
+                                                      initial=np.inf)))
+            lo = max(float(D_lin.lo[0]), float(np.max(np.nextafter(q[a < 0], np.inf),
+                                                      initial=-np.inf)))
+            if hi > lo:
+                iv.append((lo, hi))
+        iv.sort()
+        merged: list[list[float]] = []
+        for lo, hi in iv:
+            if merged and lo <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        for lo, hi in merged:
+            B = D.as_array().copy()
+            B[nl] = boxes[b]
+            B[lin[0]] = (lo, hi)
+            out.append(B)
+    return np.asarray(out).reshape(len(out), D.dim, 2)
+
+
+def union_volume(details: dict[str, Any]) -> float:
+    """Volume of the union of the pieces of :func:`affine_state_pieces` (its output, or a
+    result's ``details``): per x_NL box, the volume of the union of its x_L slices (an exact
+    union of intervals with one linear state, else a disjoint decomposition: each slice
+    minus the earlier ones) times the box's volume. Pieces of different boxes overlap at
+    most on faces."""
+    boxes, box_index, D_lin = details["boxes"], details["box"], details["D_lin"]
+    n_l = D_lin.dim
+    I = np.eye(n_l)
+    total = 0.0
+    for b in np.unique(box_index):
+        sel = []
+        for k in np.flatnonzero(box_index == b):
+            M = details["rows"][details["member"][k]]
+            sel.append(Polytope(np.vstack([M, I, -I]),
+                                np.concatenate([details["offsets"][k], D_lin.hi, -D_lin.lo])))
+        vb = float(np.prod(boxes[b, :, 1] - boxes[b, :, 0])) if boxes.shape[1] else 1.0
+        total += vb * _union_of(sel)
+    return total
+
+
+def _union_of(polys: list[Polytope]) -> float:
+    """Lebesgue measure of a union of bounded polytopes of one dimension."""
+    if not polys:
+        return 0.0
+    if polys[0].dim == 1:
+        iv = sorted((float(P.vertices().min()), float(P.vertices().max())) for P in polys
+                    if P.is_full_dimensional())
+        tot, cur_lo, cur_hi = 0.0, None, None
+        for lo, hi in iv:
+            if cur_hi is None or lo > cur_hi:
+                if cur_hi is not None:
+                    tot += cur_hi - cur_lo
+                cur_lo, cur_hi = lo, hi
+            else:
+                cur_hi = max(cur_hi, hi)
+        if cur_hi is not None:
+            tot += cur_hi - cur_lo
+        return tot
+    tot = 0.0
+    for k, P in enumerate(polys):
+        rest = PolytopeUnion([P], dim=P.dim)
+        for Q in polys[:k]:
+            rest = rest.difference(Q)
+            if not len(rest):
+                break
+        tot += sum(R.volume() for R in rest if R.is_full_dimensional())
+    return tot
+
+
+def check_members(target: Any, n: int) -> list[Polytope]:
+    """The target of the affine-state method as polytopes (a Polytope, a Box, a
+    PolytopeUnion, or a SetUnion/list of these); anything else is refused."""
+    from .controllable import _flatten
+
+    items = _flatten(target)
+    bad = sorted({type(S).__name__ for S in items if not isinstance(S, Polytope)})
+    if bad:
+        raise TypeError(f"method='affine_state' needs a polytopic target (Polytope, Box or "
+                        f"unions of them); got {', '.join(bad)}")
+    for S in items:
+        if S.dim != n:
+            raise DimensionError(f"the target has dimension {S.dim}; the model has n = {n}")
+    return [S for S in items if not S.is_empty()]
+
+
+def is_polytopic(target: Any) -> bool:
+    """Whether every member of the target is a polytope (or a box)."""
+    from .controllable import _flatten
+
+    try:
+        return all(isinstance(S, Polytope) for S in _flatten(target))
+    except TypeError:
+        return False
+
+
+def affine_state_sequence(model: Model, T: Polytope, eps: float, *, robust: bool,
+                          polytopic_method: str, max_steps: int, terminal_info: dict[str, Any],
+                          D: Box, u_eps: float, relative: bool, until: np.ndarray | None,
+                          max_pairs: int, time_limit: float | None, progress: bool | None,
+                          rtol: float = 1e-3) -> Any:
+    """The polytopic sequence of Alg 6.4-6.6: ``P_0 = T``, ``P_i`` a polytope proven inside
+    the union of the pieces of the one-step set of ``P_{i-1}`` (Alg 6.4) and ``P_{i-1}``
+    itself (Alg 6.2 or 6.5, :func:`~casadi_cmpc.inner_polytope`).
+
+    Claim: a state of ``P_i`` outside ``P_{i-1}`` lies in a piece, so a stored control
+    sends it into ``P_{i-1}`` for all w; hence ``level(x) = min {i : x in P_i}`` decreases
+    at every step and x reaches T in at most ``level(x)`` steps. The sets need not be nested.
+    The recursion stops when a polytope grows by less than ``rtol`` (relative volume) over
+    its predecessor (``converged_at``; a stopping rule, not a proof that the maximal set is
+    reached).
+    """
+    from tqdm.auto import tqdm
+
+    from .controllable import about_model
+    from .linear_sets import SetSequence
+    from .polytopic import inner_polytope
+
+    t0 = time.perf_counter()
+    _, _, semantics = _semantics(model, robust)
+    seq = SetSequence(sets=[T], info={
+        "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
+        "about": about_model(model, robust),
+        "method": "affine state (Alg 6.4) with polytopic approximation "
+                  f"({'Alg 6.5' if polytopic_method == 'scaling' else 'Alg 6.2'})",
+        "polytopic": True, "state_names": list(model.state_names), **terminal_info})
+    seq.status = "max_steps"
+    prev = T
+    vol_prev = T.volume()
+    bar = tqdm(total=None, desc="controllable sets (affine state)", unit="step",
+               disable=progress is False, delay=0 if progress else 2.0, leave=False)
+    try:
+        for i in range(1, max_steps + 1):
+            ts = time.perf_counter()
+            r = affine_state_pieces(model, [prev], D, eps, robust=robust, u_eps=u_eps,
+                                    relative=relative, max_pairs=max_pairs,
+                                    time_limit=time_limit)
+            step: dict[str, Any] = {
+                "boxes": np.zeros((0, model.n, 2)), "witness": r["witness"],
+                "pieces": PolytopeUnion(r["pieces"], dim=model.n), "polytope": None,
+                "boundary": 0, "n_pairs": r["n_pairs"]}
+            if not r["pieces"]:
+                P = None
+            else:
+                B = inner_boxes(r, D)
+                members = ([Polytope.from_box(Box(b[:, 0], b[:, 1])) for b in B]
+                           if B is not None else list(r["pieces"]))
+                got = inner_polytope(members + [prev], method=polytopic_method)
+                P = got[0] if got[1].proved else None
+            step["polytope"] = P
+            step["seconds"] = time.perf_counter() - ts
+            seq.steps.append(step)
+            if P is None:  # nothing proven beyond P_{i-1}: the sequence stays
+                seq.sets.append(prev)
+                seq.converged_at = i
+                seq.status = "converged" if r["complete"] else "budget"
+                break
+            seq.sets.append(P)
+            vol = P.volume()
+            bar.set_postfix_str(f"P_{i}: volume {vol:.4g}", refresh=False)
+            bar.update(1)
+            if not r["complete"]:
+                seq.status = "budget"
+                break
+            if vol <= vol_prev * (1.0 + rtol):
+                seq.converged_at = i
+                seq.status = "converged"
+                break
+            if until is not None and np.all(P.contains(until)):
+                seq.status = "until"
+                break
+            prev, vol_prev = P, vol
+    except KeyboardInterrupt:
+        seq.status = "interrupted"
+    finally:
+        bar.close()
+    seq.info["seconds"] = time.perf_counter() - t0
+    return seq
+
+
+def _semantics(model: Model, robust: bool) -> tuple[Any, Any, str]:
+    from .controllable import _w_setup
+
+    return _w_setup(model, robust, None)
