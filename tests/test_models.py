@@ -23,8 +23,9 @@ ALL_NAMES = [
     "linear_sliding", "cannon_001", "cstr", "grimm", "cannon", "cannon_robust",
     "cannon_robust_wide", "khalil_affine_state", "khalil_affine_control", "mirosot",
 ]
-# examples not from the thesis (tests/test_extra_models.py)
-EXTRA_NAMES = ["cartpole", "three_tank"]
+# examples not from the thesis (tests/test_extra_models.py; the validated ODE model
+# moore_greitzer: tests/test_validated_ode_models.py)
+EXTRA_NAMES = ["cartpole", "three_tank", "moore_greitzer"]
 
 # name -> (n, m, l, X (n, 2), U (m, 2), W (l, 2) or None, E-number)
 EXPECTED = {

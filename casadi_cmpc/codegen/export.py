@@ -319,7 +319,15 @@ def _model_fun(model: Any) -> ca.Function:
     return ca.Function("cmpc_f", [model.x, model.u, w], [model.f], ["x", "u", "w"], ["x_next"])
 
 
-def _interval_c(funs: list[tuple[ca.Function, str]], what: str) -> str:
+def _model_interval_fun(model: Any) -> Any:
+    """The successor ``(x, u, w)`` the C interval checks enclose: the model's interval
+    source (:meth:`~casadi_cmpc.Model.interval_map`), exact literals, and of a validated
+    ODE model the proven remainder, so that the C proofs are about the same map as the
+    Python ones (:func:`_model_fun`, the numeric map, is for predictions only)."""
+    return model.interval_map("xuw")
+
+
+def _interval_c(funs: list[tuple[Any, str]], what: str) -> str:
     """C text of the outward-rounded interval evaluations ``name(il, ih, ol, oh)`` of the
     given Functions (see :mod:`casadi_cmpc.interval._cgen`); an ExportError names the
     operations without an interval rule."""
@@ -367,7 +375,7 @@ class _SequenceExport:
         if spec.local_law is None:
             raise ExportError("the controller has no local law for the terminal set")
         self.model_fun = _model_fun(model)
-        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv")],
+        self.intervals = _interval_c([(_model_interval_fun(model), "cmpc_f_iv")],
                                      "the C check of a successor")
         T0 = seq.sets[0]
         if isinstance(T0, Box):
@@ -512,7 +520,7 @@ class _QuasiExport:
         if len(spec.polytopes) < 2:
             raise ExportError("the controller holds no quasi set (only the target)")
         self.model_fun = _model_fun(model)
-        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv")],
+        self.intervals = _interval_c([(_model_interval_fun(model), "cmpc_f_iv")],
                                      "the C proof of a planned sequence")
         n, m, i = model.n, model.m, spec.steps
         self.poly_rows = [P.A.shape[0] for P in spec.polytopes]
@@ -635,7 +643,7 @@ class _ContractiveExport:
         # the check of a sequence: the interval evaluation of the exact check graph, the
         # one the Python controller certifies with (constants as intervals param_lo/hi)
         self.model_fun = _model_fun(spec.model)
-        self.intervals = _interval_c([(self.model_fun, "cmpc_f_iv"),
+        self.intervals = _interval_c([(_model_interval_fun(spec.model), "cmpc_f_iv"),
                                       (self.h.check_fun, "cmpc_check_iv")],
                                      "the C check of a predicted sequence")
 

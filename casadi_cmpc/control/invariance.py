@@ -277,9 +277,12 @@ def _point_counterexample(P: np.ndarray, S: Any, model: Model, cl: Model, law_fu
         if out_s.any():
             k = int(np.flatnonzero(out_s)[0])
             ws = f" with w = {wv.tolist()}" if model.l else ""
+            val = (f"= {nxt[k].tolist()}" if not model.is_validated else
+                   f"in [{enc[k, :, 0].tolist()}, {enc[k, :, 1].tolist()}] (the enclosure "
+                   f"of the flow)")
             return Certificate(
                 "refuted", False, claim,
-                f"state set: f(x, law(x)){ws} = {nxt[k].tolist()} lies outside S at "
+                f"state set: f(x, law(x)){ws} {val} lies outside S at "
                 f"x = {P[k].tolist()}", details, counterexample=P[k])
     return None
 
@@ -358,10 +361,11 @@ def _closed(model: Model, law: Any) -> tuple[Model, Any]:
 
 
 def model_key(model: Model) -> str:
-    """A hash of the model's map ``f(x, u, w)`` (its serialized CasADi Function)."""
-    import hashlib
-
-    return hashlib.sha256(model.function.serialize().encode()).hexdigest()[:20]
+    """A hash of what the model's proofs read: :meth:`Model.interval_key`, the model's
+    interval source with the intervals of its parameters (of a validated ODE model the
+    Taylor map and its proven remainder, so two such models differing only in the
+    remainder, e.g. in order, dt or domain, do not share certificates)."""
+    return model.interval_key()
 
 
 def law_identity(model: Model, law: Any) -> dict[str, str]:
@@ -386,8 +390,11 @@ def law_from_function(model: Model, serialized: str) -> ca.SX:
 
 
 def _claim(model: Model, Wb: Any) -> str:
-    """The invariance claim, saying which disturbances it covers."""
+    """The invariance claim, saying which disturbances it covers and, for a model that is
+    not a plain discrete one, what its map f is (:attr:`Model.discretisation`)."""
     body = ": f(x, law(x), w) in S and law(x) in U = " + _box_text(model.U)
+    if model.discretisation != "discrete model":
+        body += f", f being {model.discretisation}"
     if not model.l:
         return "for every x in S" + body.replace(", w)", ")")
     if np.array_equal(Wb.lo, Wb.hi):

@@ -763,6 +763,14 @@ class _ParamContractor:
             raise DimensionError(
                 f"contractor needs a Function with one input and one output; "
                 f"'{g.name()}' has {pf.n_in()} inputs and {g.n_out()} outputs")
+        if pf.interval.any():
+            # a validated ODE model's enclosure: the backward pass would also read the
+            # guard of its validated domain as a constraint and drop states outside it,
+            # about which the enclosure says nothing (they must stay undecided)
+            raise UnsupportedOperationError(
+                f"'{g.name()}' has interval-valued parameters (an enclosure such as a "
+                "validated ODE model's remainder, valid on its domain only): the contractor "
+                "cannot use it; use sivia without contract=True")
         own = [k for k in pf.derived if k not in pf.literals]
         if own:
             raise UnsupportedOperationError(

@@ -239,7 +239,8 @@ class _Consts:
     def __init__(self, exact: bool) -> None:
         self.exact = exact
         self.syms: list[ca.SX] = []
-        self.vals: list[np.ndarray] = []
+        self.los: list[np.ndarray] = []
+        self.his: list[np.ndarray] = []
 
     def __call__(self, value: Any, name: str) -> Any:
         """The constant ``value``: a number (float graph) or a symbol (exact graph)."""
@@ -247,10 +248,43 @@ class _Consts:
         if not self.exact:
             return float(a) if a.ndim == 0 else ca.DM(a)
         shape = (1, 1) if a.ndim == 0 else ((a.size, 1) if a.ndim == 1 else a.shape)
+        v = np.reshape(a, shape).ravel(order="F")
+        return self._symbol(name, shape, v, v)
+
+    def _symbol(self, name: str, shape: tuple[int, ...], lo: np.ndarray,
+                hi: np.ndarray) -> ca.SX:
         sym = ca.SX.sym(name, *shape)
         self.syms.append(ca.vec(sym))
-        self.vals.append(np.reshape(a, shape).ravel(order="F"))
+        self.los.append(np.asarray(lo, dtype=float))
+        self.his.append(np.asarray(hi, dtype=float))
         return sym
+
+    def successor(self, model: Model) -> Any:
+        """A callable ``(x, u, w) -> [x_next]``: of the float graph the model's numeric map
+        (:attr:`Model.function`, e.g. the Taylor polynomial of a validated ODE model), of
+        the exact graph its interval source (:meth:`Model.interval_expr`: every literal a
+        thin parameter, the proven remainder of a validated model interval valued).
+
+        In the exact graph of a validated model every call (every step of a prediction)
+        gets parameters of its own: the remainder takes its own value in its interval at
+        each step, so a search that treats the parameters as variables (the optimality
+        bracket bisects them) must not tie the steps to one shared value. The parameters
+        of other models are fixed numbers, shared by the steps."""
+        if not self.exact:
+            fun = model.function
+            return lambda *args: fun.call(list(args))
+        expr, P, Pb = model.interval_expr()
+        g = ca.Function("f_interval", [model.x, model.u, model._w_sym, P], [expr])
+        if not model.is_validated:  # fixed numbers (thin, or widened roundings): shared
+            cp = self._symbol("f_par", (Pb.shape[0], 1), Pb[:, 0], Pb[:, 1])
+            return lambda *args: g.call(list(args) + [cp])
+
+        def step(*args: Any) -> list[Any]:
+            k = len(self.syms)
+            cp = self._symbol(f"f_par_{k}", (Pb.shape[0], 1), Pb[:, 0], Pb[:, 1])
+            return g.call(list(args) + [cp])
+
+        return step
 
     def function(self, fun: ca.Function, name: str) -> Any:
         """A callable ``(*args) -> list of outputs`` equal to ``fun`` with its literals as
@@ -269,8 +303,14 @@ class _Consts:
         return ca.vertcat(*self.syms) if self.syms else ca.SX(0, 1)
 
     @property
-    def values(self) -> np.ndarray:
-        return np.concatenate(self.vals) if self.vals else np.zeros(0)
+    def lo(self) -> np.ndarray:
+        """Lower bounds of the parameters (equal to :attr:`hi` but for interval-valued
+        ones, such as a validated model's remainder)."""
+        return np.concatenate(self.los) if self.los else np.zeros(0)
+
+    @property
+    def hi(self) -> np.ndarray:
+        return np.concatenate(self.his) if self.his else np.zeros(0)
 
 
 def _graph(mpc: ContractiveMPC, N: int, exact: bool, states: Any = None) -> dict[str, Any]:
@@ -284,7 +324,7 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool, states: Any = None) -> dict
     K = _Consts(exact)
     us = ca.SX.sym("u", N * m)
     x0 = ca.SX.sym("x0", n)
-    f = K.function(model.function, "f")
+    f = K.successor(model)
     w = K(mpc.w_nominal, "w_nom") if model.l else ca.DM.zeros(0, 1)
     xs = [x0]
     defects = []
@@ -350,7 +390,7 @@ def _graph(mpc: ContractiveMPC, N: int, exact: bool, states: Any = None) -> dict
     return {"us": us, "x0": x0, "xs": xs, "cost": cost, "eN": eN,
             "common": ca.vertcat(*parts), "c_lo": np.concatenate(lo),
             "c_hi": np.concatenate(hi), "c_val": c_val, "labels": labels,
-            "params": K.params, "values": K.values,
+            "params": K.params, "p_lo": K.lo, "p_hi": K.hi,
             "defects": ca.vertcat(*defects) if defects else ca.SX(0, 1)}
 
 
@@ -378,8 +418,8 @@ class _Horizon:
         full = ca.vertcat(pg.inputs[0], pg.params)
         made_lo, made_hi = (np.array([_widen_constant(v)[i] for v in pg.values])
                             for i in (0, 1))
-        self.param_lo = np.concatenate([ex["values"], made_lo])
-        self.param_hi = np.concatenate([ex["values"], made_hi])
+        self.param_lo = np.concatenate([ex["p_lo"], made_lo])
+        self.param_hi = np.concatenate([ex["p_hi"], made_hi])
         self.n_created = pg.values.size
         self.check_fun = ca.Function(f"check_{N}", [full], [pg.outputs[0]])
         self.check_lo = np.concatenate([ex["c_lo"], [-np.inf]])
@@ -1078,7 +1118,8 @@ class ContractiveMPC:
         Y = h.step_check.evaluate_unchecked([box], 1)[0][0]
         # slack >= 0 on every row <=> verified (NaN-free by the inclusion's contract): the
         # slacks Y_lo - lo and hi - Y_hi = -(Y_hi - hi), both columns in one pass
-        slack = Y.reshape(-1) - h.check_bounds
+        with np.errstate(invalid="ignore"):  # inf - inf (an unbounded enclosure): NaN,
+            slack = Y.reshape(-1) - h.check_bounds  # which fails the test below
         slack *= h.check_signs
         margin = float(slack.min())
         details = {"min_margin": margin, "contraction_upper": float(Y[-1, 1]), "_Y": Y}
@@ -1297,9 +1338,16 @@ class ContractiveMPC:
         eps = self.optimal_eps or self.search_eps
         r = minimize(h.exact_cost, Z, eps, constraints=g, max_boxes=self.search_max_boxes,
                      time_limit=self.search_time_limit, progress=False)
-        return {"lower": float(r.lower), "upper": float(r.upper),
-                "width": float(r.upper - r.lower), "status": r.status.name,
-                "boxes": int(r.n_boxes)}
+        out = {"lower": float(r.lower), "upper": float(r.upper),
+               "width": float(r.upper - r.lower), "status": r.status.name,
+               "boxes": int(r.n_boxes)}
+        if self.model.is_validated:
+            # the search also minimises over the remainder's interval parameters: its
+            # lower bound holds for the true flow, its upper bound only for the Taylor
+            # enclosure's best member, not for the flow
+            out.update(upper=math.inf, width=math.inf,
+                       note="validated ODE model: only the lower bound is proven")
+        return out
 
     def _verified(self, x: np.ndarray, N: int, u: np.ndarray, stats: dict, details: dict,
                   t0: float, proofs: list[dict]) -> MPCResult:
@@ -1321,9 +1369,11 @@ class ContractiveMPC:
         if claim is None:
             w = (f" with the nominal disturbance w = {self.w_nominal.tolist()} only (other "
                  "w in W are not covered)" if self.model.l else "")
+            about = ("" if self.model.discretisation == "discrete model"
+                     else f" (model: {self.model.discretisation})")
             claim = self._claims[N] = (
                 f"the sequence keeps x(1..{N}) in X, satisfies every extra constraint and "
-                f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}")
+                f"contracts the {self._norm_name()} by alpha = {self.alpha}{w}{about}")
         if self.certify_optimal:
             details["optimal_bracket"] = self._optimality(x, N)
         cert = Certificate("verified", True, claim,

@@ -608,7 +608,9 @@ def _check_in_W(W: Any, rows: np.ndarray, k0: int) -> None:
 def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = None,
              seed: int | np.random.Generator | None = 0, *,
              stop_when: Callable[[np.ndarray], bool] | None = None, check_x0: bool = True,
-             progress: bool | None = None) -> Trajectory:
+             progress: bool | None = None,
+             plant: Callable[[np.ndarray, np.ndarray, np.ndarray], Any] | None = None
+             ) -> Trajectory:
     """Run ``x(k+1) = f(x(k), u(k), w(k))`` with ``u(k) = ctrl(x(k))`` for ``steps`` steps.
 
     Parameters
@@ -652,6 +654,12 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
         ``steps`` only when the run has no other end; with ``stop_when`` the bar counts
         the steps done (at most ``steps``), and a run that ends normally closes it with its
         total equal to the steps done.
+    plant : callable, optional
+        ``plant(x (n,), u (m,), w (l,)) -> x_next (n,)``: the system actually run, e.g. an
+        accurate ODE integration over one sample of a model built by
+        :meth:`~casadi_cmpc.Model.from_ode` (u and w held over the sample). Default: the
+        model's map :attr:`~casadi_cmpc.Model.function` (of a validated ODE model its
+        Taylor polynomial, of an Euler/RK4 model that map).
 
     Returns
     -------
@@ -705,7 +713,9 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
     label, w_at = _disturbance(model, disturbance, steps, seed)
     if stop_when is not None and not callable(stop_when):
         raise TypeError("stop_when must be a callable x -> bool or None")
-    F = model.function
+    if plant is not None and not callable(plant):
+        raise TypeError("plant must be a callable (x, u, w) -> x_next or None")
+    F = model.function if plant is None else plant
 
     xs = np.empty((steps + 1, n))
     us = np.empty((steps, m))
@@ -748,7 +758,11 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
             u = _check_vector(u_raw, m, "the controller's input", k)
             info = controller.info()
             w = w_at(k, x)
-            x_next = np.asarray(F(x, u, w), dtype=float).reshape(n)
+            x_next = np.asarray(F(x, u, w), dtype=float)
+            if x_next.size != n:
+                raise DimensionError(f"the plant returned {x_next.size} numbers at step {k}; "
+                                     f"expected the {n} of the next state")
+            x_next = x_next.reshape(n)
             rec = _record(info, controller.mode, elapsed, controller.levels)
             # commit the step only when all of it is computed
             us[k], ws[k], xs[k + 1] = u, w, x_next

@@ -25,7 +25,13 @@ import casadi as ca
 import numpy as np
 
 from .._validate import as_boxes
-from ..exceptions import CmpcWarning, DimensionError, ModelError, UnboundedSetError
+from ..exceptions import (
+    CmpcWarning,
+    DimensionError,
+    ModelError,
+    UnboundedSetError,
+    UnsupportedOperationError,
+)
 from ..interval.modal import SemanticExtension
 from ..model import Model
 from ..sets.box import Box
@@ -228,17 +234,30 @@ def _model_function(model: Model, X0: Any, U: Any, W: Any
         raise ModelError(
             f"model '{model.name}' has no input: there is no u to quantify; invert its "
             "successor with cm.sivia(model, Y=..., eps=...) (for every w in W)")
+    if model.is_validated:
+        raise ModelError(_ENCLOSURE_REFUSED.format(
+            f"model '{model.name}' is {model.discretisation}: its successor"))
     if model.l == 0:
         if W is not None:
             raise ModelError(f"model '{model.name}' has no disturbance w; do not pass W")
-        fun = model._cached(("quantified_map",), lambda: ca.Function(
-            f"{model.name}_f_xu", [model.x, model.u], [model.f], ["x", "u"], ["x_next"]))
     else:
         W = model.W if W is None else W
-        fun = model._cached(("quantified_map_w",), lambda: ca.Function(
-            f"{model.name}_f_xuw", [model.x, model.u, model.w], [model.f], ["x", "u", "w"],
-            ["x_next"]))
+    # the model's interval source (never model.f, which of some models is only a rounded
+    # or approximate map)
+    fun = model.interval_map("xu" if model.l == 0 else "xuw")
+    if not isinstance(fun, ca.Function):
+        raise ModelError(f"model '{model.name}' has no plain CasADi graph for the semantic "
+                         f"extension (its interval source is {fun!r})")
     return fun, model.X if X0 is None else X0, model.U if U is None else U, W
+
+
+_ENCLOSURE_REFUSED = (
+    "{} is enclosed by a Taylor polynomial plus interval-valued remainder parameters, not "
+    "given by one graph. The semantic extension proves 'for every w there is a u' about "
+    "one continuous function; for an enclosure it would prove it for every member of the "
+    "family separately, with a u that may depend on the remainder, which is not a proof "
+    "about the flow. Use an interval method instead (cm.one_step_set(..., "
+    "method='boxes') or the zonotope methods)")
 
 
 def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: Any = None,
@@ -385,6 +404,14 @@ def quantified_sivia(f: Any, X0: Any = None, U: Any = None, W: Any = None, Y: An
         raise TypeError("quantified_sivia needs the boxes X0 and U for a Function f (they "
                         "default to the model's boxes only for a Model)")
     f = split_inclusion(f, "f")[0]
+    from ..interval._derivative import ParamFunction
+
+    if isinstance(f, ParamFunction):
+        if f.interval.any():
+            raise UnsupportedOperationError(_ENCLOSURE_REFUSED.format(
+                f"'{f.function.name()}' has interval-valued parameters: it"))
+        raise TypeError(f"f must be a casadi.Function; got the ParamFunction "
+                        f"'{f.function.name()}' (pass the Model itself)")
     if not isinstance(f, ca.Function):
         raise TypeError(f"f must be a casadi.Function or an InclusionFunction; got "
                         f"{type(f).__name__}")
