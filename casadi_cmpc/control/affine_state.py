@@ -168,6 +168,11 @@ def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
         inside &= ~same | np.tril(np.ones((k, k), dtype=bool), -1)  # a copy: keep the first
         np.fill_diagonal(inside, False)
         return idx[~inside.any(axis=1)]
+    # a row whose offset is below its minimum over D_L leaves nothing (exact necessary test)
+    low = (np.minimum(M * D_lin.lo, M * D_lin.hi)).sum(axis=1)
+    idx = idx[(C[idx] >= low).all(axis=1)]
+    if idx.size == 0:
+        return idx
     idx = idx[_undominated(C[idx])]
     n_l = M.shape[1]
     I = np.eye(n_l)
@@ -289,44 +294,165 @@ def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: floa
             "complete": complete, "seconds": time.perf_counter() - t0}
 
 
+def _cell_intervals(details: dict[str, Any]) -> dict[int, list[tuple[float, float]]]:
+    """With one linear state: per x_NL cell (index into ``details["boxes"]``), the x_L
+    intervals of its pieces, each rounded inward (every x with x_NL in the cell and x_L in
+    the interval lies in the piece), sorted, not merged."""
+    D_lin = details["D_lin"]
+    out: dict[int, list[tuple[float, float]]] = {}
+    for k, b in enumerate(details["box"]):
+        a = details["rows"][details["member"][k]][:, 0]
+        c = details["offsets"][k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = c / np.where(a == 0, 1.0, a)
+        # {x : a x <= c}: x <= c/a for a > 0, x >= c/a for a < 0, rounded inward
+        hi = min(float(D_lin.hi[0]), float(np.min(np.nextafter(q[a > 0], -np.inf),
+                                                  initial=np.inf)))
+        lo = max(float(D_lin.lo[0]), float(np.max(np.nextafter(q[a < 0], np.inf),
+                                                  initial=-np.inf)))
+        if hi > lo:
+            out.setdefault(int(b), []).append((lo, hi))
+    return out
+
+
+def _merge(iv: list[tuple[float, float]]) -> list[list[float]]:
+    """Union of closed intervals as disjoint ones (touching ones joined; exact)."""
+    merged: list[list[float]] = []
+    for lo, hi in sorted(iv):
+        if merged and lo <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    return merged
+
+
 def inner_boxes(details: dict[str, Any], D: Box) -> np.ndarray | None:
     """With one linear state: the union of the pieces as boxes (N, n, 2), each inside it
     (per x_NL box, the union of its x_L intervals, each interval rounded inward, merged
     where they overlap or touch). None with several linear states (the pieces are then
     not boxes)."""
-    D_lin = details["D_lin"]
-    if D_lin.dim != 1:
+    if details["D_lin"].dim != 1:
         return None
-    boxes, box_index = details["boxes"], details["box"]
+    boxes = details["boxes"]
     nl, lin = list(details["nl"]), list(details["lin"])
     out = []
-    for b in np.unique(box_index):
-        iv = []
-        for k in np.flatnonzero(box_index == b):
-            a = details["rows"][details["member"][k]][:, 0]
-            c = details["offsets"][k]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                q = c / np.where(a == 0, 1.0, a)
-            # {x : a x <= c}: x <= c/a for a > 0, x >= c/a for a < 0, rounded inward
-            hi = min(float(D_lin.hi[0]), float(np.min(np.nextafter(q[a > 0], -np.inf),
-                                                      initial=np.inf)))
-            lo = max(float(D_lin.lo[0]), float(np.max(np.nextafter(q[a < 0], np.inf),
-                                                      initial=-np.inf)))
-            if hi > lo:
-                iv.append((lo, hi))
-        iv.sort()
-        merged: list[list[float]] = []
-        for lo, hi in iv:
-            if merged and lo <= merged[-1][1]:
-                merged[-1][1] = max(merged[-1][1], hi)
-            else:
-                merged.append([lo, hi])
-        for lo, hi in merged:
+    for b, iv in sorted(_cell_intervals(details).items()):
+        for lo, hi in _merge(iv):
             B = D.as_array().copy()
             B[nl] = boxes[b]
             B[lin[0]] = (lo, hi)
             out.append(B)
     return np.asarray(out).reshape(len(out), D.dim, 2)
+
+
+def _inside_on_cell(P: Polytope, cell: np.ndarray, nl: list[int], j: int
+                    ) -> tuple[float, float] | None:
+    """The x_j interval ``{t : x in P for every x with x_NL in cell, x_j = t}`` (other
+    linear states absent: one linear state), rounded inward; None when empty."""
+    A, b = np.asarray(P.A), np.asarray(P.b)
+    aN = A[:, nl]
+    m = np.maximum(aN * cell[:, 0], aN * cell[:, 1]).sum(axis=1)  # max over the cell
+    m = np.nextafter(m + np.abs(m) * 4 * (len(nl) + 1) * np.finfo(float).eps
+                     + np.finfo(float).tiny, np.inf)
+    r = np.nextafter(b - m, -np.inf)
+    a = A[:, j]
+    if np.any((a == 0) & (r < 0)):
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = r / np.where(a == 0, 1.0, a)
+    hi = float(np.min(np.nextafter(q[a > 0], -np.inf), initial=np.inf))
+    lo = float(np.max(np.nextafter(q[a < 0], np.inf), initial=-np.inf))
+    return (lo, hi) if hi > lo else None
+
+
+def scaled_polytope(details: dict[str, Any], prev: Polytope, D: Box, eps: float = 1e-3
+                    ) -> Polytope | None:
+    """Alg 6.5 for one linear state, with a proof that scales: the largest ``x0 + α (H -
+    x0)`` (H the convex hull of the pieces and ``prev``, x0 the Chebyshev centre of
+    ``prev``, α to ``eps`` by bisection, α = 1 tried first) proven inside the union of the
+    pieces and ``prev``; None when no α > 0 is proven.
+
+    **Proof.** Column by column of the x_NL grid: the x_L range of ``candidate ∩ D`` over
+    the cell (rigorous support bounds, :meth:`Polytope._support_upper`) must lie in one
+    interval of the union, on that cell, of the pieces' x_L intervals and of the x_L
+    interval on which ``prev`` holds the whole cell (all rounded inward). Cells the
+    candidate's rigorous bounding box misses are skipped. The proof is local to each cell,
+    so its cost grows with the number of cells, not with the number of pieces.
+    """
+    nl, lin = list(details["nl"]), list(details["lin"])
+    j = lin[0]
+    boxes = details["boxes"]
+    cover: dict[int, list[list[float]]] = {}
+    per = _cell_intervals(details)
+    for b in range(boxes.shape[0]):
+        iv = list(per.get(b, []))
+        got = _inside_on_cell(prev, boxes[b], nl, j)
+        if got is not None:
+            iv.append(got)
+        if iv:
+            cover[b] = _merge(iv)
+    if not cover:
+        return None
+    pts = []
+    for b, iv in cover.items():
+        corners = np.stack(np.meshgrid(*[boxes[b, i] for i in range(len(nl))],
+                                       indexing="ij"), axis=-1).reshape(-1, len(nl))
+        for lo, hi in iv:
+            for t in (lo, hi):
+                X = np.empty((corners.shape[0], D.dim))
+                X[:, nl] = corners
+                X[:, j] = t
+                pts.append(X)
+    pts.append(prev.vertices())
+    H = Polytope.convex_hull(np.concatenate(pts))
+    x0 = prev.chebyshev_ball()[0]
+    Dp = Polytope.from_box(D)
+    e = np.zeros((2, D.dim))
+    e[0, j], e[1, j] = 1.0, -1.0
+
+    def prove(P: Polytope) -> bool:
+        PD = P.intersect(Dp)
+        if PD.is_empty():
+            return False
+        bb = PD.bounding_box().as_array()
+        for b in range(boxes.shape[0]):
+            cell = boxes[b]
+            if np.any(cell[:, 1] < bb[nl, 0]) or np.any(cell[:, 0] > bb[nl, 1]):
+                continue  # the candidate does not reach this cell
+            iv = cover.get(b)
+            if not iv:
+                return False
+            S = Polytope(np.vstack([PD.A, np.eye(D.dim)[nl], -np.eye(D.dim)[nl]]),
+                         np.concatenate([PD.b, cell[:, 1], -cell[:, 0]]))
+            if S.is_empty():  # numerically: bound its x_L by the candidate's (rigorous) box
+                lo, hi = float(bb[j, 0]), float(bb[j, 1])
+            else:
+                up = S._support_upper(e)
+                hi, lo = float(up[0]), -float(up[1])
+            if not (np.isfinite(hi) and np.isfinite(lo)):
+                return False
+            if not any(a <= lo and hi <= c for a, c in iv):
+                return False
+        return True
+
+    A, bH = np.asarray(H.A), np.asarray(H.b)
+
+    def scaled(alpha: float) -> Polytope:
+        Ax0 = A @ x0
+        return Polytope(A, Ax0 + alpha * (bH - Ax0)).intersect(Dp)
+
+    best = None
+    if prove(scaled(1.0)):
+        return scaled(1.0)
+    lo_a, hi_a = 0.0, 1.0
+    while hi_a - lo_a > eps:
+        mid = 0.5 * (lo_a + hi_a)
+        cand = scaled(mid)
+        if prove(cand):
+            lo_a, best = mid, cand
+        else:
+            hi_a = mid
+    return best
 
 
 def union_volume(details: dict[str, Any]) -> float:
@@ -452,6 +578,8 @@ def affine_state_sequence(model: Model, T: Polytope, eps: float, *, robust: bool
                 "boundary": 0, "n_pairs": r["n_pairs"]}
             if not r["pieces"]:
                 P = None
+            elif polytopic_method == "scaling" and len(r["lin"]) == 1:
+                P = scaled_polytope(r, prev, D)
             else:
                 B = inner_boxes(r, D)
                 members = ([Polytope.from_box(Box(b[:, 0], b[:, 1])) for b in B]

@@ -860,7 +860,7 @@ def _terminal_info(model: Model, cert: Any) -> dict[str, Any]:
 
 
 def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
-                      polytopic: bool = False, polytopic_method: str = "separating",
+                      polytopic: bool = False, polytopic_method: str | None = None,
                       max_steps: int = 100, law: Any = None, certificate: Any = None,
                       assume_invariant: bool = False, X: Any = None, obstacles: Any = None,
                       u_eps: float = 1 / 16, max_cells: int = 64, w_points: Any = None,
@@ -891,8 +891,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     polytopic : bool
         After each step, replace the union of proven boxes by one polytope proven inside it
         (:func:`casadi_cmpc.inner_polytope`, ``polytopic_method`` = ``"separating"``, Alg
-        6.2, or ``"scaling"``, Alg 6.5); the next target is the union ``T ∪ P_1 ∪ ... ∪
-        P_i`` (6.8).
+        6.2, the default, or ``"scaling"``, Alg 6.5); the next target is the union ``T ∪
+        P_1 ∪ ... ∪ P_i`` (6.8).
     max_steps : int
         Largest number of steps.
     X, obstacles, u_eps, max_cells, w_points
@@ -944,7 +944,9 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         step. ``"affine_state"`` (thesis §6.2, Alg 6.4-6.6; models with an affine state
         part, :attr:`Model.nonlinear_states` a strict subset): every step grids only the
         nonlinear states and U, its one-step set is a union of polytopes, and ``P_i`` is
-        one polytope proven inside that union and ``P_{i-1}`` (``polytopic_method``;
+        one polytope proven inside that union and ``P_{i-1}`` (``polytopic_method``,
+        default ``"scaling"``, Alg 6.5: with one linear state its proof runs column by
+        column of the grid, so its cost does not grow with the number of pieces;
         ``polytopic`` is implied). A state of ``P_i`` outside ``P_{i-1}`` reaches
         ``P_{i-1}`` in one step for all w; the sets need not be nested (``level(x)`` is the
         smallest i with x in ``P_i``). The recursion stops when a polytope grows by less
@@ -990,6 +992,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     max_steps = int(max_steps)
     if max_steps < 1:
         raise ValueError(f"max_steps must be >= 1; got {max_steps}")
+    if polytopic_method is None:  # Alg 6.2 for boxes, Alg 6.5 for the affine-state pieces
+        polytopic_method = "scaling" if str(method).lower() == "affine_state" else "separating"
     if polytopic_method not in ("separating", "scaling"):
         raise ValueError("polytopic_method must be 'separating' (Alg 6.2) or 'scaling' "
                          "(Alg 6.5)")
