@@ -470,8 +470,15 @@ class SetSequenceMPC:
             raise ValueError(f"minimax must be one of {', '.join(map(repr, _MINIMAX_MODES))}; "
                              f"got {minimax!r}")
         mode = minimax.lower()
+        validated = self.model._exact_f is not None
         if mode == "auto":
-            return "interval" if self.robust and not self.model.is_affine_in_w else "vertices"
+            return ("interval" if self.robust and not self.model.is_affine_in_w
+                    and not validated else "vertices")
+        if mode == "interval" and validated:
+            raise ModelError(
+                f"minimax='interval' brackets the cost of f's expressions, and model "
+                f"'{self.model.name}' is {self.model.discretisation}: its bracket would not be "
+                "about the interval source of the proofs; use minimax='vertices'")
         if mode == "interval" and self.model.l == 0:
             raise ValueError(f"minimax='interval' needs a disturbance; model "
                              f"'{self.model.name}' has none (use 'vertices' or 'auto')")
