@@ -171,11 +171,11 @@ def test_three_state_area_of_polytope_slices_matches_sampling():
 
 def test_affine_sequence_levels_decrease_along_stored_controls(e11):
     m, T = e11.model, e11.terminal
-    seq = cm.controllable_sets(m, T, 0.1, robust=True, method="affine_state",
+    seq = cm.controllable_sets(m, T, 0.05, robust=True, method="affine_state",
                                law=e11.local_law, max_steps=3, progress=False)
-    assert seq.info["terminal_certificate"] == "proved"
+    assert seq.info["terminal_certificate"] == "proved" and "Alg 6.5" in seq.info["method"]
     assert len(seq.sets) == 4 and all(isinstance(S, cm.Polytope) for S in seq.sets)
-    assert seq.sets[-1].volume() > 2 * T.volume()
+    assert seq.sets[-1].volume() > 2.5 * T.volume()  # 0.102 -> 0.305 (P_3)
     rng = np.random.default_rng(4)
     for i in range(1, len(seq.sets)):
         P, prev = seq.sets[i], seq.sets[i - 1]
@@ -188,6 +188,20 @@ def test_affine_sequence_levels_decrease_along_stored_controls(e11):
             assert hit, "a state of P_i outside P_{i-1} lies in no piece"
             u = wit[hit[0]]
             assert _successors_in(m, x[None], u[None], prev).all()
+
+
+def test_separating_approximation_of_the_pieces_is_proven_inside(e11):
+    """Alg 6.2 on the first step's pieces (Fig 6.7's other polytope)."""
+    m, T = e11.model, e11.terminal
+    seq = cm.controllable_sets(m, T, 0.1, robust=True, method="affine_state",
+                               polytopic_method="separating", law=e11.local_law,
+                               max_steps=1, progress=False)
+    P1, pieces = seq.sets[1], seq.steps[0]["pieces"]
+    X = P1.bounding_box().lo + np.random.default_rng(5).random((4000, 2)) * (
+        P1.bounding_box().hi - P1.bounding_box().lo)
+    X = X[P1.contains(X)]
+    assert X.shape[0] > 100
+    assert (pieces.contains(X) | T.contains(X)).all()
 
 
 def test_affine_sequence_refuses_general_only_options(e11):
