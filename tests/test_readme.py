@@ -14,7 +14,7 @@ BLOCKS = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re
 # README says its examples show
 CHECKS = {
     'res = cm.minimize(': "assert res.lower <= res.upper\nassert paving.n_inner > 0",
-    'K1 = cm.one_step_set(': (
+    'K1 = cm.one_step_set(ex9': (
         "x = [0.6, -0.2]\n"
         "u = K1.control(x)\n"
         "assert u is not None and not ex9.terminal.contains(x)\n"
@@ -26,6 +26,11 @@ CHECKS = {
         "assert os.path.isfile('e9_sets.npz')\n"),
     'r = ctrl.solve([2.0, 2.0])': "assert r.horizon == 2 and r.certificate.label == 'verified'",
     'cert = cm.certify_invariant(': "assert cert.proved is True",
+    'K1 = cm.one_step_set(ex11.model': (
+        "assert u is not None and K1.contains(x) and not ex11.terminal.contains(x)\n"
+        "for w in ex11.model.W.vertices():  # affine in w: the vertices suffice\n"
+        "    assert ex11.terminal.contains(ex11.model.step(x, u, w))\n"
+        "assert mg.discretisation.startswith('the sampled-data ODE (validated')\n"),
 }
 
 
