@@ -174,12 +174,38 @@ def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
     if idx.size == 0:
         return idx
     idx = idx[_undominated(C[idx])]
+    if idx.size == 0:
+        return idx
+    inside = _interior_point(M, C[idx], D_lin)
     n_l = M.shape[1]
     I = np.eye(n_l)
-    keep = [k for k in idx if Polytope(np.vstack([M, I, -I]),
-                                       np.concatenate([C[k], D_lin.hi, -D_lin.lo])
-                                       ).is_full_dimensional()]
+    keep = [k for k, ok in zip(idx, inside, strict=True)
+            if ok or Polytope(np.vstack([M, I, -I]),
+                              np.concatenate([C[k], D_lin.hi, -D_lin.lo])).is_full_dimensional()]
     return np.asarray(keep, dtype=int)
+
+
+def _interior_point(M: np.ndarray, C: np.ndarray, D_lin: Box, sweeps: int = 30) -> np.ndarray:
+    """Whether a point strictly inside ``{x in D_L : M x <= C[k]}`` is found, per row of C
+    (K, t): cyclic projections onto the (slightly tightened) half-spaces and the box, from
+    the box's centre, all candidates at once; a point with every inequality strict proves
+    an interior (in floating point: the choice only sizes the list of pieces, no claim
+    rests on it). False only means "not found" (an LP decides those)."""
+    lo, hi = D_lin.lo, D_lin.hi
+    K = C.shape[0]
+    X = np.broadcast_to(0.5 * (lo + hi), (K, lo.size)).copy()
+    nrm = (M * M).sum(axis=1)
+    scale = np.maximum(1.0, np.abs(C).max(axis=1))
+    Ct = C - 1e-9 * scale[:, None]  # aim slightly inside
+    for _ in range(sweeps):
+        for i in range(M.shape[0]):
+            if nrm[i] == 0:
+                continue
+            viol = X @ M[i] - Ct[:, i]
+            X -= np.maximum(viol, 0.0)[:, None] * M[i][None, :] / nrm[i]
+        X = np.clip(X, lo, hi)
+    strict = ((X @ M.T) < C).all(axis=1) & ((X > lo) & (X < hi)).all(axis=1)
+    return strict
 
 
 def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: float, *,
