@@ -4,11 +4,17 @@
 ``cannon_robust``) and builds the controller the library has for it. For the examples with
 controllable sets (``example.info["sequence"]``: E8, E9, E10, E14) that is the full pipeline:
 certify the terminal set, compute (or load from the cache) the sequence of (robust)
-controllable sets, and run the dual-mode one-step MPC along it, every control certified. For
-the others (or with ``--controller contractive``) it is the contractive MPC of thesis §4.3
-configured in ``example.info["mpc"]``. It simulates the closed loop from the thesis' initial
-states, checks the constraints itself, and prints a summary. With ``--out DIR`` it writes the
-figures (PNG), ``summary.json`` and ``report.txt``.
+controllable sets, and run the dual-mode one-step MPC along it, every control certified.
+The two structured examples of thesis chapter 6 run their own pipelines:
+``khalil_affine_state`` (E11, ``info["affine_state"]``: T proven, the affine-state
+controllable sets of Alg 6.4-6.6, the one-step MPC along them) and
+``khalil_affine_control`` (E12, ``info["quasi"]``: T proven, the quasi 2-step robust
+controllable sets of Alg 6.7 and the MPC of Alg 6.8); ``--eps`` changes the resolution of
+any set pipeline. For the others (or with ``--controller contractive``) it is the
+contractive MPC of thesis §4.3 configured in ``example.info["mpc"]``. It simulates the
+closed loop from the thesis' initial states, checks the constraints itself, and prints a
+summary. With ``--out DIR`` it writes the figures (PNG), ``summary.json`` and
+``report.txt``.
 
 ``cmpc list`` prints the examples (name, thesis example or "extra" for the examples not from
 the thesis, dimensions, what the system is).
@@ -140,16 +146,18 @@ def _save_atomically(seq: Any, path: Path) -> None:
 
 def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
                          solver: str | None = None, checkpoint: str | None = None,
-                         executor: Any = None) -> Any:
+                         executor: Any = None, eps: float | None = None) -> Any:
     """The SetSequenceMPC of an example and its sequence, from the cache or computed (and
     then cached); ``solver`` overrides the example's (default ipopt); ``checkpoint``: the
     file that makes the computation resumable (see :func:`controllable_sets`); ``executor``:
-    where the large levels of the set computation run."""
+    where the large levels of the set computation run; ``eps`` replaces the example's."""
     from .control.controllable import controllable_sets
     from .control.linear_sets import SetSequence
     from .mpc.sequence import SetSequenceMPC
 
-    cfg = ex.info["sequence"]
+    cfg = dict(ex.info["sequence"])
+    if eps is not None:
+        cfg["eps"] = float(eps)
     path = _cache_path(ex, cfg, cache)
     seq = None
     if path.is_file():
@@ -198,19 +206,207 @@ def _sequence_controller(ex: Any, cache: str | None, progress: bool | None,
     return ctrl, seq
 
 
+def _set_pipeline(ex: Any) -> str | None:
+    """The set pipeline ``cmpc run`` builds for an example: ``"quasi"`` (quasi i-step sets
+    and their MPC, Alg 6.7-6.8: E12), ``"affine_state"`` (the controllable sets of the
+    affine-state method, Alg 6.4-6.6, and the one-step MPC: E11), ``"sequence"`` (the
+    general controllable sets: E8, E9, E10, E14) or None (contractive MPC only)."""
+    for key in ("quasi", "affine_state", "sequence"):
+        if key in ex.info:
+            return key
+    return None
+
+
+def _pipeline_config(ex: Any, eps: float | None) -> dict:
+    """The example's set configuration, with ``eps`` (``--eps``) replacing its own."""
+    cfg = dict(ex.info[_set_pipeline(ex)])
+    if eps is not None:
+        cfg["eps"] = float(eps)
+    return cfg
+
+
+# the set sequences of the structured pipelines computed in this process (they are not
+# written to the disk cache), by a digest of the model, T, the law and the settings
+_SETS_OF_THIS_PROCESS: dict[str, Any] = {}
+
+
+def _structured_key(ex: Any, cfg: dict) -> str:
+    from .control._checkpoint import digest
+
+    items = sorted((k, np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
+                   for k, v in cfg.items() if k != "note")
+    return digest((ex.name, ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
+                   np.asarray(ex.terminal.b).tobytes(), _law_key(ex), repr(items)))
+
+
+def _until(ex: Any, cfg: dict) -> np.ndarray | None:
+    """The run's initial states when the configuration stops the recursion as soon as they
+    all lie in a set (``cfg["until_x0s"]``; the sets are then not the maximal ones)."""
+    if not cfg.get("until_x0s"):
+        return None
+    x0s = ex.info.get("run", {}).get("x0s", ex.x0s)
+    return np.asarray(x0s, dtype=float).reshape(-1, ex.model.n)
+
+
+def _affine_state_controller(ex: Any, progress: bool | None, eps: float | None = None,
+                             solver: str | None = None) -> tuple[Any, Any]:
+    """E11's pipeline (thesis §6.2): T proven robustly invariant under the local law
+    (:func:`certify_invariant`, inside :func:`controllable_sets`), the polytopic robust
+    controllable sets of the affine-state method (Alg 6.4-6.6) to convergence, and the
+    robust one-step MPC along them (:class:`SetSequenceMPC`)."""
+    from .control.controllable import controllable_sets
+    from .mpc.sequence import SetSequenceMPC
+
+    cfg = _pipeline_config(ex, eps)
+    key = _structured_key(ex, cfg)
+    seq = _SETS_OF_THIS_PROCESS.get(key)
+    if seq is None:
+        t0 = time.perf_counter()
+        seq = controllable_sets(ex.model, ex.terminal, cfg["eps"], robust=cfg["robust"],
+                                method="affine_state", law=ex.local_law,
+                                polytopic_method=cfg.get("polytopic_method", "separating"),
+                                max_steps=int(cfg.get("max_steps", 100)),
+                                until=_until(ex, cfg), progress=progress)
+        print(f"affine-state controllable sets (Alg 6.4-6.6) computed in "
+              f"{time.perf_counter() - t0:.1f} s ({seq.status})")
+        if seq.status in _COMPLETE:
+            _SETS_OF_THIS_PROCESS[key] = seq
+    else:
+        print("affine-state controllable sets reused (computed earlier in this process)")
+    if len(seq) < 2:
+        raise ValueError(f"no controllable set proven at eps = {cfg['eps']} "
+                         f"({seq.status}); try a smaller --eps")
+    print(f"terminal set: {seq.info.get('terminal_certificate')} invariant under the local "
+          f"law; sequence: {len(seq) - 1} steps, eps = {seq.info.get('eps')}, "
+          f"{seq.info.get('semantics')}")
+    ctrl = SetSequenceMPC(ex.model, seq, Q=cfg.get("Q"), R=cfg.get("R"),
+                          local_law=ex.local_law, solver=solver or cfg.get("solver", "ipopt"),
+                          robust=cfg["robust"])
+    return ctrl, seq
+
+
+def _quasi_controller(ex: Any, progress: bool | None, eps: float | None = None,
+                      solver: str | None = None) -> tuple[Any, Any]:
+    """E12's pipeline (thesis §6.3): T proven robustly invariant under the local law
+    (:func:`certify_invariant` and ``T ⊆ X`` by rigorous support bounds), the recursion of
+    polytopic quasi i-step robust controllable sets (Alg 6.7, §6.3.4) to convergence, and
+    :class:`QuasiMultiStepMPC` (Alg 6.8) along them."""
+    from .control.controllable import _check_terminal, _terminal_info
+    from .control.quasi import quasi_controllable_sets
+    from .mpc.quasi import QuasiMultiStepMPC
+
+    cfg = _pipeline_config(ex, eps)
+    model = ex.model
+    key = _structured_key(ex, cfg)
+    seqs = _SETS_OF_THIS_PROCESS.get(key)
+    if seqs is None:
+        t0 = time.perf_counter()
+        # T in X (rigorous support bounds) and robustly invariant under the local law
+        # (certify_invariant at resolutions relative to T); a clean exit when not proven
+        cert = _check_terminal(model, ex.terminal, ex.local_law, None, False, True,
+                               cfg["eps"], model.X)
+        t_cert = time.perf_counter() - t0
+        print(f"terminal set proven robustly invariant under the local law in {t_cert:.1f} s"
+              f": {cert.claim}")
+        t0 = time.perf_counter()
+        seqs = quasi_controllable_sets(
+            model, ex.terminal, int(cfg["steps"]), cfg["eps"],
+            max_sets=int(cfg.get("max_sets", 30)),
+            polytopic_method=cfg.get("polytopic_method", "separating"),
+            until=_until(ex, cfg), progress=progress)
+        seqs.info.update({"terminal_certificate": cert.label, "robust": model.l > 0,
+                          "terminal_seconds": t_cert, **_terminal_info(model, cert)})
+        print(f"quasi {seqs.steps}-step robust controllable sets (Alg 6.7) computed in "
+              f"{time.perf_counter() - t0:.1f} s ({seqs.status})")
+        if seqs.status in ("converged", "until", "max_sets"):
+            _SETS_OF_THIS_PROCESS[key] = seqs
+    else:
+        print(f"quasi {seqs.steps}-step sets reused (computed earlier in this process)")
+    if len(seqs) < 2:
+        raise ValueError(f"no quasi {seqs.steps}-step set proven at eps = {cfg['eps']} "
+                         f"({seqs.status}); try a smaller --eps")
+    print(f"terminal set: {seqs.info.get('terminal_certificate')} invariant under the local "
+          f"law; sets P_0..P_{len(seqs) - 1}, eps = {seqs.info.get('eps')}, "
+          f"{seqs.info.get('semantics')}")
+    ctrl = QuasiMultiStepMPC(model, seqs, P0=cfg.get("P0"), Q=cfg.get("Q"), R=cfg.get("R"),
+                             local_law=ex.local_law,
+                             solver=solver or cfg.get("solver", "ipopt"))
+    return ctrl, seqs
+
+
 def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
                 progress: bool | None = None, checkpoint: str | None = None,
-                executor: Any = None) -> tuple[Any, Any]:
+                executor: Any = None, eps: float | None = None) -> tuple[Any, Any]:
     """The controller of an example and its set sequence (None for the contractive MPC)."""
     from .mpc.contractive import ContractiveMPC
 
-    if kind == "sequence" and "sequence" not in ex.info:
+    pipeline = _set_pipeline(ex)
+    if kind == "sequence" and pipeline is None:
         raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
                          "--controller contractive")
-    if kind in ("auto", "sequence") and "sequence" in ex.info:
+    if kind in ("auto", "sequence") and pipeline is not None:
+        if pipeline != "sequence" and (checkpoint is not None or executor is not None):
+            raise ValueError(f"--checkpoint, --workers and --scheduler are for the general "
+                             f"controllable sets; '{ex.name}' runs the {pipeline} pipeline")
+        if pipeline == "quasi":
+            return _quasi_controller(ex, progress, eps)
+        if pipeline == "affine_state":
+            return _affine_state_controller(ex, progress, eps)
         return _sequence_controller(ex, cache, progress, checkpoint=checkpoint,
-                                    executor=executor)
+                                    executor=executor, eps=eps)
+    if eps is not None:
+        raise ValueError("--eps sets the resolution of the controllable sets; the "
+                         "contractive MPC has none")
     return ContractiveMPC(ex.model, **ex.info["mpc"]), None
+
+
+def _sequence_summary(ex: Any, seq: Any, runs: list) -> dict:
+    """What ``summary.json`` records of a set sequence (general, affine-state or quasi)."""
+    from .control.quasi import QuasiSequence
+
+    out = {"pipeline": _set_pipeline(ex), "steps": len(seq) - 1,
+           "converged_at": seq.converged_at, "status": seq.status,
+           "eps": seq.info.get("eps"), "semantics": seq.info.get("semantics"),
+           "terminal_certificate": seq.info.get("terminal_certificate"),
+           "terminal_claim": seq.info.get("terminal_claim"),
+           "levels_x0": [seq.level(r["x0"]) for r in runs]}
+    if isinstance(seq, QuasiSequence):
+        out.update(method=f"quasi {seq.steps}-step robust controllable sets (Alg 6.7), "
+                          "polytopic recursion (§6.3.4)",
+                   quasi_steps=seq.steps, areas=list(seq.areas),
+                   seconds=seq.info.get("total_seconds"),
+                   seconds_per_set=list(seq.info.get("seconds", [])),
+                   terminal_seconds=seq.info.get("terminal_seconds"),
+                   W=np.asarray(seq.info.get("W")).tolist())
+    else:
+        out.update(method=seq.info.get("method", "general (Alg 4.6/6.1)"),
+                   seconds=seq.info.get("seconds"))
+        if _set_pipeline(ex) == "affine_state":
+            out["areas"] = [float(S.volume()) for S in seq.sets]
+    return out
+
+
+def _quasi_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
+    """``sets.png`` of the quasi pipeline: the polytopes P_m coloured by index, T, X and
+    the closed loops (thesis Fig 6.14-6.15)."""
+    import matplotlib.pyplot as plt
+
+    from .plot import plot_runs
+
+    fig, ax = plt.subplots(figsize=(8.0, 7.4), layout="constrained")
+    plot_runs(trajs, ax=ax, model=ex.model, show_X=False, legend=False)
+    seq.plot(ax=ax, model=ex.model, boxes=True)
+    M = len(seq) - 1
+    done = (f"recursion stopped: P_{seq.converged_at} no larger than "
+            f"P_{seq.converged_at - 1}" if seq.converged_at is not None
+            else f"P_0..P_{M} ({seq.status})")
+    ax.set_title(f"{ex.name} ({ex.info.get('example', '')}): quasi {seq.steps}-step robust "
+                 f"controllable sets P_m and closed loops\neps = {seq.info.get('eps')}; "
+                 f"{done}", fontsize="medium")
+    path = out / "sets.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path.name
 
 
 def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
@@ -223,8 +419,13 @@ def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
     # runs first (drawn above the sets by their zorder), then the sets and one legend
     plot_runs(trajs, ax=ax, model=ex.model, show_X=False, legend=False)
     seq.plot(ax=ax, model=ex.model)
-    done = (f"K_{seq.converged_at} = K_{seq.converged_at - 1}: maximal set reached"
-            if seq.converged_at is not None else f"{len(seq) - 1} steps ({seq.status})")
+    if seq.converged_at is None:
+        done = f"{len(seq) - 1} steps ({seq.status})"
+    elif seq.info.get("polytopic"):  # a volume test on polytopes: a stopping rule
+        done = (f"recursion stopped: K_{seq.converged_at} no larger than "
+                f"K_{seq.converged_at - 1}")
+    else:
+        done = f"K_{seq.converged_at} = K_{seq.converged_at - 1}: maximal set reached"
     ax.set_title(f"{ex.name} ({ex.info.get('example', '')}): controllable sets K_i and "
                  f"closed loops\neps = {seq.info.get('eps')}, "
                  f"{seq.info.get('semantics', '')}; {done}", fontsize="medium")
@@ -327,7 +528,7 @@ def _executor(workers: int | None, scheduler: str | None) -> Any:
 def _run(name: str, out: str | None, steps: int | None, seed: int,
          progress: bool | None, controller: str = "auto", cache: str | None = None,
          checkpoint: str | None = None, workers: int | None = None,
-         scheduler: str | None = None) -> int:
+         scheduler: str | None = None, eps: float | None = None) -> int:
     from . import models
     from .mpc.simulate import _summary_lines, simulate
 
@@ -351,13 +552,14 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
     t_build = time.perf_counter()
     try:
         with _executor(workers, scheduler) as executor:
-            ctrl, seq = _controller(ex, controller, cache, progress, checkpoint, executor)
+            ctrl, seq = _controller(ex, controller, cache, progress, checkpoint, executor,
+                                    eps)
     except ValueError as exc:
         print(f"cmpc: {exc}", file=sys.stderr)
         return 2
     t_build = time.perf_counter() - t_build
     if seq is not None:
-        run["note"] = ex.info["sequence"].get("note", run.get("note", ""))
+        run["note"] = ex.info[_set_pipeline(ex)].get("note", run.get("note", ""))
     print(f"\ncontroller: {ctrl!r}")
     guarantee = getattr(ctrl, "guarantee", None)
     if guarantee:
@@ -419,18 +621,14 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
                "controller_build_time": t_build, "steps": n_steps, "seed": seed,
                "runs": runs, "total_violations": total_viol}
     if seq is not None:
-        summary["sequence"] = {"steps": len(seq) - 1, "converged_at": seq.converged_at,
-                               "status": seq.status, "eps": seq.info.get("eps"),
-                               "semantics": seq.info.get("semantics"),
-                               "terminal_certificate": seq.info.get("terminal_certificate"),
-                               "seconds": seq.info.get("seconds"),
-                               "levels_x0": [seq.level(r["x0"]) for r in runs]}
+        summary["sequence"] = _sequence_summary(ex, seq, runs)
     if out:
         d = Path(out)
         d.mkdir(parents=True, exist_ok=True)
         figs = _figures(ex, trajs, run, d)
         if seq is not None and ex.model.n >= 2:
-            figs.append(_sequence_figure(ex, seq, trajs, d))
+            figs.append(_quasi_figure(ex, seq, trajs, d) if _set_pipeline(ex) == "quasi"
+                        else _sequence_figure(ex, seq, trajs, d))
         summary["figures"] = figs
         (d / "summary.json").write_text(json.dumps(_jsonable(summary), indent=2))
         (d / "report.txt").write_text(_report(ex, ctrl, summary))
@@ -488,12 +686,38 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
                   f"w = {w_nom} only; the other w of W = [{model.W.lo.tolist()}, "
                   f"{model.W.hi.tolist()}] are not covered.")
     notes = ["What the certificates prove:", f"  disturbance: {w_line}"]
-    if sinfo:
+    quasi = sinfo.get("pipeline") == "quasi"
+    if quasi:
+        notes.append(f"  terminal set T = P_0: {sinfo.get('terminal_certificate')} robustly "
+                     f"invariant under the local law ({sinfo.get('terminal_claim')}), and "
+                     "proven inside X by rigorous support bounds.")
+        notes.append(f"  sets P_m (m >= 1): {sinfo.get('semantics')}; each P_m is a polytope "
+                     "proven inside the inner boxes of the quasi set computed towards "
+                     "P_(m-1) (model "
+                     f"'{model.name}', eps = {sinfo.get('eps')}).")
+    elif sinfo.get("pipeline") == "affine_state":
+        notes.append(f"  sets K_i of the sequence ({sinfo.get('method')}, model "
+                     f"'{model.name}', eps = {sinfo.get('eps')}): every state of K_i outside "
+                     f"K_(i-1) lies in a polytope piece whose stored control is proven to "
+                     f"bring it into K_(i-1) in one step ({sinfo.get('semantics')}); K_0 = T "
+                     f"is {sinfo.get('terminal_certificate')} invariant under the local law "
+                     "and proven inside X.")
+    elif sinfo:
         notes.append(f"  sets K_i of the sequence: every state of K_i is proven to reach "
                      f"K_(i-1) in one step ({sinfo.get('semantics')}); K_0 = T is "
                      f"{sinfo.get('terminal_certificate')} invariant under the local law.")
     for label in labels:
-        if label == "verified" and seq is not None:
+        if quasi and label == "verified":
+            text = ("outside T, the applied control starts a control sequence proven from the "
+                    "exact state x(k), by zonotope evolution with outward rounding, to keep "
+                    f"the state in X and bring it into P_(j-1) within {sinfo.get('quasi_steps')}"
+                    " steps (one level down); inside T, the applied control is proven to map "
+                    "x(k) into T" + w_claim)
+        elif quasi and label == "local_law":
+            text = ("x(k) was in T = P_0 and the local law was applied: its step from x(k) was "
+                    "proven into T by zonotope evolution when the certificate says proved; T "
+                    "is proven robustly invariant under the law either way")
+        elif label == "verified" and seq is not None:
             text = ("the applied control was re-evaluated in interval arithmetic from the "
                     f"exact state x(k): f(x(k), u(k){', w' if model.l else ''}) lies in "
                     "K_(i-1), one level down" + w_claim)
@@ -520,18 +744,34 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
 
 
 def export_controller(ex: Any, controller: str = "auto", cache: Any = None,
-                      progress: bool | None = None) -> Any:
+                      progress: bool | None = None, eps: float | None = None) -> Any:
     """The controller ``cmpc export`` writes for an example (solver ``"sqp"``): the
-    example's SetSequenceMPC (sets from the cache) or its ContractiveMPC at a fixed horizon
-    (``horizon_max`` when the example searches the horizon) in receding mode. Raises
-    ValueError for the LP form, which has no C export."""
+    example's SetSequenceMPC (sets from the cache), its QuasiMultiStepMPC
+    (``khalil_affine_control``: T proven, the quasi sets computed) or its ContractiveMPC at
+    a fixed horizon (``horizon_max`` when the example searches the horizon) in receding
+    mode (also for ``khalil_affine_state``, whose affine-state sets have no C form);
+    ``eps`` replaces the resolution of the example's sets. Raises ValueError for the LP
+    form, which has no C export."""
     from .mpc.contractive import ContractiveMPC
 
-    if controller == "sequence" and "sequence" not in ex.info:
+    pipeline = _set_pipeline(ex)
+    if controller == "sequence" and pipeline is None:
         raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
                          "--controller contractive")
-    if controller in ("auto", "sequence") and "sequence" in ex.info:
-        return _sequence_controller(ex, cache, progress, solver="sqp")[0]
+    if controller in ("auto", "sequence") and pipeline == "quasi":
+        return _quasi_controller(ex, progress, eps, solver="sqp")[0]
+    if controller == "sequence" and pipeline == "affine_state":
+        raise ValueError(f"the affine-state controllable sets of '{ex.name}' are polytope "
+                         "pieces, which the C export of the one-step MPC does not read (it "
+                         "reads proving boxes); use --controller contractive")
+    if controller == "auto" and pipeline == "affine_state":
+        print(f"{ex.name}: the C export has no form for its affine-state sets (polytope "
+              "pieces); exporting its contractive MPC")
+    if controller in ("auto", "sequence") and pipeline == "sequence":
+        return _sequence_controller(ex, cache, progress, solver="sqp", eps=eps)[0]
+    if eps is not None:
+        raise ValueError("--eps sets the resolution of the controllable sets; the "
+                         "contractive MPC has none")
     kw = dict(ex.info["mpc"])
     if kw.get("solver") == "lp":
         raise ValueError(f"example '{ex.name}' uses the LP form of the contractive MPC "
@@ -551,6 +791,9 @@ def _export(args: Any) -> int:
     from .codegen import export_c
     from .codegen.export import ExportError, build, check_build_tools
 
+    if args.eps is not None and not (np.isfinite(args.eps) and args.eps > 0):
+        print("cmpc export: --eps must be a positive number", file=sys.stderr)
+        return 2
     compiler = None
     if args.build:
         try:
@@ -571,7 +814,7 @@ def _export(args: Any) -> int:
         return 2
     try:
         ctrl = export_controller(ex, args.controller, args.cache,
-                                 False if args.no_progress else None)
+                                 False if args.no_progress else None, args.eps)
     except ValueError as exc:
         print(f"cmpc export: {exc}", file=sys.stderr)
         return 2
@@ -620,8 +863,13 @@ def _example_line(name: str) -> str:
     if section:
         desc += " (" + ", ".join("§" + p.strip().lstrip("§")
                                  for p in section.split(",") if p.strip()) + ")"
-    if "sequence" in info:
+    pipeline = _set_pipeline(ex)
+    if pipeline == "sequence":
         desc += "; controllable sets"
+    elif pipeline == "quasi":
+        desc += f"; quasi {info['quasi'].get('steps', 2)}-step controllable sets"
+    elif pipeline == "affine_state":
+        desc += "; affine-state controllable sets"
     return f"{name:22s} {str(info.get('example', '')):8s} {dims:34s} {desc}".rstrip()
 
 
@@ -700,8 +948,12 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--no-progress", action="store_true", help="no progress bar")
     p_run.add_argument("--controller", choices=("auto", "sequence", "contractive"),
                        default="auto",
-                       help="'sequence': one-step MPC along controllable sets (default for "
-                            "the examples that have them), 'contractive': contractive MPC")
+                       help="'sequence': the MPC along the example's controllable sets "
+                            "(default for the examples that have them; the quasi i-step MPC "
+                            "for khalil_affine_control), 'contractive': contractive MPC")
+    p_run.add_argument("--eps", type=float, default=None,
+                       help="resolution of the controllable sets (default: the example's; a "
+                            "larger eps is faster and gives smaller sets)")
     p_run.add_argument("--cache", default=None,
                        help="directory of cached set sequences (default: "
                             "$XDG_CACHE_HOME/casadi_cmpc or ~/.cache/casadi_cmpc)")
@@ -732,6 +984,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="run make afterwards and the example program (needs make and a "
                             "C compiler, $CC or cc; checked before anything is computed)")
     p_exp.add_argument("--cache", default=None, help="as for 'cmpc run'")
+    p_exp.add_argument("--eps", type=float, default=None, help="as for 'cmpc run'")
     p_exp.add_argument("--no-progress", action="store_true", help="no progress bar")
     sub.add_parser("list", help="list the examples: name, thesis example, dimensions, what "
                                 "the system is")
@@ -764,9 +1017,11 @@ def _command(parser: Any, args: Any) -> int:
         parser.error("--steps must be at least 1")
     if args.workers is not None and args.workers < 1:
         parser.error("--workers must be at least 1")
+    if args.eps is not None and not (np.isfinite(args.eps) and args.eps > 0):
+        parser.error("--eps must be a positive number")
     return _run(args.example, args.out, args.steps, args.seed,
                 False if args.no_progress else None, args.controller, args.cache,
-                args.checkpoint, args.workers, args.scheduler)
+                args.checkpoint, args.workers, args.scheduler, args.eps)
 
 
 if __name__ == "__main__":  # pragma: no cover

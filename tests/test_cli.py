@@ -13,6 +13,10 @@ STEPS = {"mirosot": 4, "cannon_001": 4}
 
 
 SEQUENCE_EXAMPLES = [n for n in cm.models.names() if "sequence" in cm.models.load(n).info]
+# the structured set pipelines of thesis chapter 6 (E11, E12): run and exported in
+# tests/test_cli_structured.py; here with their contractive MPC
+STRUCTURED_EXAMPLES = [n for n in cm.models.names()
+                       if {"quasi", "affine_state"} & set(cm.models.load(n).info)]
 
 
 
@@ -29,11 +33,13 @@ def cache(tmp_path_factory):
 
 def test_the_set_pipeline_covers_e8_e9_e10_e14():
     assert SEQUENCE_EXAMPLES == ["cstr", "cannon", "cannon_robust", "cannon_robust_wide"]
+    assert STRUCTURED_EXAMPLES == ["khalil_affine_state", "khalil_affine_control"]
 
 
-# every example with 'auto'; the set-pipeline examples also with the contractive MPC
-RUNS = ([(n, "auto") for n in cm.models.names()]
-        + [(n, "contractive") for n in SEQUENCE_EXAMPLES])
+# every example with 'auto' (the structured ones in test_cli_structured.py); the
+# set-pipeline examples also with the contractive MPC
+RUNS = ([(n, "auto") for n in cm.models.names() if n not in STRUCTURED_EXAMPLES]
+        + [(n, "contractive") for n in SEQUENCE_EXAMPLES + STRUCTURED_EXAMPLES])
 
 
 @pytest.mark.parametrize("name, controller", RUNS)
@@ -122,7 +128,7 @@ def test_list_says_what_every_example_is(capsys):
     assert main(["list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     names = [line.split()[0] for line in lines]
-    assert names == cm.models.names() and len(names) == 12
+    assert names == cm.models.names() and len(names) == 13
     for name, line in zip(names, lines, strict=True):
         ex = cm.models.load(name)
         n, m, nw = ex.model.n, ex.model.m, ex.model.l
@@ -159,7 +165,10 @@ def test_export_every_listed_example(name, tmp_path, capsys, cache):
     """``cmpc export`` writes the C sources of every example's controller (the sequence
     examples from the cached sets); the header names the example's dimensions."""
     out = tmp_path / "c"
-    code = main(["export", name, "--out", str(out), "--cache", cache, "--no-progress"])
+    # the structured examples' own controllers: tests/test_cli_structured.py
+    controller = "contractive" if name in STRUCTURED_EXAMPLES else "auto"
+    code = main(["export", name, "--out", str(out), "--cache", cache, "--no-progress",
+                 "--controller", controller])
     text = capsys.readouterr()
     ex = cm.models.load(name)
     if ex.info["mpc"].get("solver") == "lp" and name not in SEQUENCE_EXAMPLES:
@@ -178,7 +187,7 @@ def test_export_every_listed_example(name, tmp_path, capsys, cache):
     from casadi_cmpc.cli import export_controller
     from casadi_cmpc.codegen import load
 
-    ctrl = export_controller(ex, cache=cache, progress=False)
+    ctrl = export_controller(ex, controller, cache=cache, progress=False)
     C = load(out)
     x0s = np.asarray(ex.info.get("run", {}).get("x0s", ex.x0s), dtype=float)
     x = xc = x0s.reshape(-1, ex.model.n)[0]

@@ -194,7 +194,8 @@ def test_report_footnote_without_disturbance_and_guarantee_line(scalar_seq):
 
 def test_cli_report_of_a_nominal_contractive_mpc(tmp_path, capsys):
     """khalil_affine_state: a model with w and a nominal contractive MPC."""
-    assert main(["run", "khalil_affine_state", "--steps", "3", "--no-progress", "--out",
+    assert main(["run", "khalil_affine_state", "--controller", "contractive", "--steps", "3",
+                 "--no-progress", "--out",
                  str(tmp_path)]) == 0
     out = capsys.readouterr().out
     report = (tmp_path / "report.txt").read_text()

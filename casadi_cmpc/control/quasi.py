@@ -570,6 +570,85 @@ class QuasiSequence:
         """Same as ``polytopes``."""
         return self.polytopes
 
+    @property
+    def status(self) -> str:
+        """Why the recursion stopped: ``"converged"``, ``"until"``, ``"max_sets"`` or ``"no
+        polytope"`` (no box proven, or no polytope proven inside the boxes)."""
+        return str(self.info.get("status", "max_sets"))
+
+    def plot(self, ax: Any = None, dims: tuple[int, int] = (0, 1), cmap: str = "viridis",
+             colorbar: bool = True, *, model: Model | None = None, legend: bool = True,
+             boxes: bool = False, **kw: Any) -> Any:
+        """Draw ``P_M`` (back) to ``P_0 = T`` (front), coloured by index (cf. Fig 6.14).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Created when omitted.
+        dims : (int, int)
+            States on the horizontal and vertical axes (projections for n > 2).
+        cmap : str
+            Sequential colour map of the index m (``P_0 = T`` at its low end).
+        colorbar : bool
+            Add a colour bar as the key of the index (m = set ``P_m``).
+        model : Model, optional
+            Draw X dashed and label the axes with the state names and units.
+        legend : bool
+            Legend below the axes: X, T and the meaning of unfilled space.
+        boxes : bool
+            Also draw the inner boxes of the last quasi set (light grey, under the sets).
+        **kw
+            Passed to :meth:`Polytope.plot` for every set.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        import matplotlib as mpl
+        import matplotlib.pyplot as plt
+        from matplotlib.patches import Patch, Rectangle
+
+        from ..plot import axis_label, legend_outside, new_axes, plot_boxes, variable_labels
+
+        ax = new_axes(ax)
+        i_d, j_d = int(dims[0]), int(dims[1])
+        k = max(len(self.polytopes), 2)
+        cmap_ = plt.get_cmap(cmap)
+        norm = mpl.colors.Normalize(vmin=0, vmax=k - 1)
+        alpha = kw.pop("alpha", 0.8)
+        if boxes and self.results and self.results[-1].n_inner:
+            plot_boxes(np.asarray(self.results[-1].inner), ax=ax, dims=dims,
+                       facecolor="0.85", edgecolor="none",
+                       label=f"inner boxes of the last quasi {self.steps}-step set")
+        for m in range(len(self.polytopes) - 1, 0, -1):
+            self.polytopes[m].plot(ax=ax, dims=dims, facecolor=cmap_(norm(m)), alpha=alpha,
+                                   edgecolor="k", linewidth=0.5, **kw)
+        self.polytopes[0].plot(ax=ax, dims=dims, facecolor=cmap_(norm(0)), alpha=1.0,
+                               edgecolor="magenta", linewidth=1.8,
+                               label="T = P_0 (terminal set)")
+        if model is not None:
+            X = model.X
+            ax.add_patch(Rectangle((X.lo[i_d], X.lo[j_d]), X.hi[i_d] - X.lo[i_d],
+                                   X.hi[j_d] - X.lo[j_d], fill=False, edgecolor="k",
+                                   linestyle="--", linewidth=1.0, label="X (state box)"))
+            ax.update_datalim([[X.lo[i_d], X.lo[j_d]], [X.hi[i_d], X.hi[j_d]]])
+            ax.autoscale_view()
+            names, units = variable_labels(model, "x")
+        else:
+            names = [f"x{q + 1}" for q in range(self.polytopes[0].dim)]
+            units = [None] * len(names)
+        if colorbar:
+            sm = mpl.cm.ScalarMappable(norm=norm, cmap=cmap_)
+            ax.figure.colorbar(sm, ax=ax, label=f"index m (set P_m: into P_(m-1) within "
+                                                f"{self.steps} steps)")
+        ax.set_xlabel(axis_label(names[i_d], units[i_d]))
+        ax.set_ylabel(axis_label(names[j_d], units[j_d]))
+        if legend:
+            legend_outside(ax, where="below", ncol=2, extra=[Patch(
+                facecolor="white", edgecolor="0.4", linewidth=0.8,
+                label="white (unfilled): not proven controllable")])
+        return ax
+
     def __len__(self) -> int:
         return len(self.polytopes)
 

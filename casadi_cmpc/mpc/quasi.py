@@ -127,6 +127,10 @@ class QuasiMultiStepMPC:
                               self._nlp_spec[2])
         self._plan: dict[str, Any] | None = None
         self.last_info: dict[str, Any] = {}
+        # the cost (6.22) drives the state to the origin; all of it (for reports)
+        self.x_ref = np.zeros(n)
+        self.contract = np.eye(n)
+        self.robust = model.l > 0  # the proofs cover every disturbance sequence in W
         self._claim = (f" for all w in W = [{W[:, 0].tolist()}, {W[:, 1].tolist()}] (robust)"
                        if model.l else " (no disturbance)")
 
