@@ -97,8 +97,9 @@ def _cache_path(ex: Any, cfg: dict, cache: str | None) -> Path:
     """A file name that changes with the model, T, the law and the settings."""
     from . import __version__
     from .control._checkpoint import digest
+    from .control.invariance import model_key
 
-    h = digest((ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
+    h = digest((model_key(ex.model), np.asarray(ex.terminal.A).tobytes(),
                 np.asarray(ex.terminal.b).tobytes(), _law_key(ex),
                 repr(sorted((k, v) for k, v in cfg.items() if k in ("eps", "robust"))),
                 __version__, _SEQUENCE_FORMAT))
@@ -235,7 +236,9 @@ def _structured_key(ex: Any, cfg: dict) -> str:
 
     items = sorted((k, np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
                    for k, v in cfg.items() if k != "note")
-    return digest((ex.name, ex.model.function.serialize(), np.asarray(ex.terminal.A).tobytes(),
+    from .control.invariance import model_key
+
+    return digest((ex.name, model_key(ex.model), np.asarray(ex.terminal.A).tobytes(),
                    np.asarray(ex.terminal.b).tobytes(), _law_key(ex), repr(items)))
 
 
@@ -566,6 +569,8 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
         print(f"  guarantee: {guarantee}")
     if run.get("note"):
         print(f"  {run['note']}")
+    print(f"  certificates are about {model.discretisation}; closed loops run on "
+          f"{_plant_text(model, run)}")
     n_steps = int(steps if steps is not None else run.get("steps", 50))
     x0s = np.asarray(run.get("x0s", ex.x0s), dtype=float).reshape(-1, model.n)
     disturbance = run.get("disturbance")
@@ -576,7 +581,7 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
         print(f"\nrun {i}: x0 = {x0.tolist()}, {n_steps} steps"
               + (f", disturbance {disturbance}" if disturbance else ""))
         traj = simulate(model, ctrl, x0, n_steps, disturbance=disturbance, seed=seed + i - 1,
-                        progress=progress)
+                        progress=progress, plant=run.get("plant"))
         if traj.interrupted:  # Ctrl-C: the run ends (exit code 130), nothing is written
             raise KeyboardInterrupt
         trajs.append(traj)
@@ -615,6 +620,8 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
     total_viol = sum(r["violations"]["state"] + r["violations"]["input"]
                      + r.get("obstacle_violations", 0) for r in runs)
     summary = {"example": name, "thesis_example": ex.info.get("example"),
+               "model_map": model.discretisation,
+               "simulated_on": _plant_text(model, run),
                "controller": repr(ctrl), "guarantee": guarantee,
                "robust": bool(getattr(ctrl, "robust", False)) and model.l > 0,
                "note": run.get("note", ""),
@@ -637,6 +644,17 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
         print(f"cmpc: {total_viol} constraint violations in the closed loop", file=sys.stderr)
         return 1
     return 0
+
+
+def _plant_text(model: Any, run: dict) -> str:
+    """What the closed loops were simulated on: the example's plant (e.g. the ODE
+    integrated accurately) or the model's own map."""
+    plant = run.get("plant")
+    if plant is None:
+        return f"the model's own map ({model.discretisation})"
+    doc = (getattr(plant, "__doc__", None) or "").strip().splitlines()
+    return f"the plant {getattr(plant, '__name__', 'given')}()" + (
+        f" ({doc[0].rstrip('.')})" if doc else "")
 
 
 def _report(ex: Any, ctrl: Any, summary: dict) -> str:
@@ -685,7 +703,10 @@ def _report(ex: Any, ctrl: Any, summary: dict) -> str:
         w_line = (f"nominal controller: its certificates hold for the nominal disturbance "
                   f"w = {w_nom} only; the other w of W = [{model.W.lo.tolist()}, "
                   f"{model.W.hi.tolist()}] are not covered.")
-    notes = ["What the certificates prove:", f"  disturbance: {w_line}"]
+    notes = ["What the certificates prove:",
+             f"  model: they are about {model.discretisation} of '{model.name}'; the closed "
+             f"loops above ran on {summary.get('simulated_on', 'the model map')}.",
+             f"  disturbance: {w_line}"]
     quasi = sinfo.get("pipeline") == "quasi"
     if quasi:
         notes.append(f"  terminal set T = P_0: {sinfo.get('terminal_certificate')} robustly "

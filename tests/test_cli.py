@@ -75,6 +75,15 @@ def test_run_every_listed_example(name, controller, tmp_path, capsys, cache):
         assert all(lv is not None and lv >= 0 for lv in seq["levels_x0"])
     report = (tmp_path / "report.txt").read_text()
     assert name in report and "violations counted by the simulator" in report
+    # the claim follows the model: which map the certificates are about, what ran
+    m = ex.model
+    assert f"they are about {m.discretisation}" in report
+    assert summary["model_map"] == m.discretisation
+    if ex.info["run"].get("plant") is not None:  # an ODE integrated, not the model's map
+        assert summary["simulated_on"].startswith("the plant ")
+        assert m.discretisation.startswith("the sampled-data ODE (validated")
+    else:
+        assert summary["simulated_on"] == f"the model's own map ({m.discretisation})"
 
 
 def test_default_example_is_the_robust_set_pipeline_and_says_what_it_runs(capsys, cache):
