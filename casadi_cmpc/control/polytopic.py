@@ -24,6 +24,7 @@ import numpy as np
 from .._validate import as_boxes
 from ..exceptions import DimensionError, EmptySetError, UnboundedSetError
 from ..sets import _lp
+from ..sets._poly_ops import subset_of_union
 from ..sets.box import Box
 from ..sets.paving import Paving
 from ..sets.polytope import Polytope, PolytopeUnion, hull
@@ -190,6 +191,7 @@ class _Prover:
         self.n_probe = int(n_probe)
         self.calls = 0  # candidates tested
         self.proofs = 0  # exact covering tests run
+        self.exhausted = 0  # covering tests stopped by their budget ("not proven")
 
     def _probes(self, P: Polytope) -> np.ndarray:
         n = P.dim
@@ -224,7 +226,9 @@ class _Prover:
             return False
         sub = PolytopeUnion([self.members[i] for i in np.flatnonzero(keep)])
         self.proofs += 1
-        return bool(P.is_subset(sub))
+        status = subset_of_union(P, sub)
+        self.exhausted += status == "budget exhausted"
+        return status == "proved"
 
 
 def _scaled(A: np.ndarray, b: np.ndarray, x0: np.ndarray, alpha: float) -> Polytope:
@@ -481,7 +485,8 @@ def inner_polytope(boxes: Any, method: str = "separating", *, eps: float = 1e-3,
         or the shrink factor applied to the cut polytope of Alg 6.2, 1 when none was
         needed), ``n_members``, ``n_pieces``/``n_cuts``/``gamma`` (Alg 6.2), ``n_tests``
         (candidates tested), ``n_proofs`` (exact covering tests run on them),
-        ``candidates`` (default centre), ``seconds``.
+        ``n_budget_exhausted`` (covering tests stopped by their budget: those candidates
+        count as not proven, never as refuted), ``candidates`` (default centre), ``seconds``.
 
     Raises
     ------
@@ -643,14 +648,18 @@ def inner_polytope(boxes: Any, method: str = "separating", *, eps: float = 1e-3,
             break  # the hull itself is proven: no other centre can do better
     if len(centers) > 1:
         details["candidates"] = tried
-    details.update(n_tests=prove.calls, n_proofs=prove.proofs)
+    details.update(n_tests=prove.calls, n_proofs=prove.proofs,
+                   n_budget_exhausted=prove.exhausted)
     if best is None:
         details.update(center=np.asarray(centers[0][0], dtype=float).copy(),
                        center_rule=centers[0][1], alpha=0.0, seconds=time.perf_counter() - t0)
         cert = Certificate(
             "undecided", None, claim,
             "no candidate could be proven inside the union, down to the scale factor "
-            "1e-9 about the centre; the empty polytope is returned", details)
+            "1e-9 about the centre"
+            + (f" ({prove.exhausted} covering proofs stopped by their budget: not proven, "
+               "not refuted)" if prove.exhausted else "")
+            + "; the empty polytope is returned", details)
         return InnerPolytope(Polytope.empty(n), cert)
     _, P, alpha, run, how = best
     details.update(run)

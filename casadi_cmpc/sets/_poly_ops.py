@@ -17,7 +17,7 @@ from .._validate import as_float_array
 from ..exceptions import DimensionError, InvalidBoundsError, UnboundedSetError
 from . import _hull
 from ._boxkernel import _gamma
-from ._poly_union import PolytopeUnion, _uncovered
+from ._poly_union import CoverBudget, PolytopeUnion, _uncovered
 from .box import Box
 
 if TYPE_CHECKING:
@@ -119,24 +119,16 @@ def pontryagin_difference(P: Polytope, other: Any) -> Polytope:
 
 
 def is_subset(P: Polytope, other: Any, tol: float | None = None) -> bool:
-    """Whether ``P ⊆ other`` (:meth:`Polytope.is_subset`)."""
+    """Whether ``P ⊆ other`` (:meth:`Polytope.is_subset`).
+
+    For a union, ``True`` is a proof and ``False`` means "not proven" (see
+    :func:`subset_of_union`, which also says why).
+    """
     from .polytope import Polytope
 
     n = P.dim
     if isinstance(other, PolytopeUnion):
-        if other.dim != n:
-            raise DimensionError(
-                f"other has the wrong dimension; expected {n} instead of {other.dim}")
-        if P.is_empty():
-            return True
-        R = P._rows()
-        if not P.is_bounded():
-            return False
-        if not P.is_full_dimensional():
-            return flat_subset_of_union(P, other)
-        box = P.bounding_box().as_array()[None]
-        centre = P._chebyshev()[0][None]
-        return _uncovered(other._members(), box, centre, [(R.A, R.b)])[0] is None
+        return subset_of_union(P, other) == "proved"
     Q = Polytope._coerce(other, n)
     if P.is_empty():
         return True
@@ -150,12 +142,62 @@ def is_subset(P: Polytope, other: Any, tol: float | None = None) -> bool:
     return bool(np.all(h <= QR.bn + tol_))
 
 
-def flat_subset_of_union(P: Polytope, U: PolytopeUnion) -> bool:
+def subset_of_union(P: Polytope, U: PolytopeUnion, budget: CoverBudget | None = None,
+                    stats: dict[str, Any] | None = None) -> str:
+    """Three-valued covering test ``P ⊆ U`` by the covering engine.
+
+    Parameters
+    ----------
+    P : Polytope
+        Dimension n.
+    U : PolytopeUnion
+        Dimension n.
+    budget : CoverBudget, optional
+        Limits of the proof (default: the engine's default budget).
+    stats : dict, optional
+        Filled with the engine's counters (see ``_uncovered``).
+
+    Returns
+    -------
+    str
+        ``"proved"`` (``P ⊆ U`` proven on the stored rows), ``"not proven"`` (a piece
+        could not be proven empty: usually a point of P outside U, or P unbounded) or
+        ``"budget exhausted"`` (the proof was stopped: nothing is known). Neither of the
+        last two is a proof that ``P`` is not a subset.
+
+    Raises
+    ------
+    DimensionError
+        ``U`` has another dimension.
+    """
+    n = P.dim
+    if U.dim != n:
+        raise DimensionError(f"other has the wrong dimension; expected {n} instead of {U.dim}")
+    if P.is_empty():
+        return "proved"
+    if not P.is_bounded():
+        return "not proven"
+    st: dict[str, Any] = {} if stats is None else stats
+    if not P.is_full_dimensional():
+        ok = flat_subset_of_union(P, U, budget, st)
+    else:
+        R = P._rows()
+        box = P.bounding_box().as_array()[None]
+        centre = P._chebyshev()[0][None]
+        ok = _uncovered(U._members(), box, centre, [(R.A, R.b)], budget, st)[0] is None
+    if ok:
+        return "proved"
+    return "budget exhausted" if st.get("exhausted") else "not proven"
+
+
+def flat_subset_of_union(P: Polytope, U: PolytopeUnion, budget: CoverBudget | None = None,
+                         stats: dict[str, Any] | None = None) -> bool:
     """``P ⊆ U`` for a bounded P without interior, decided in the affine hull of P.
 
     The members are restricted to the affine hull ``{o + Q t}`` of the vertices of P
     (rows ``A Q``, ``b - A o``, rounded), where P has an interior, and the covering
-    engine runs there: a proof up to the rounding of that restriction only.
+    engine runs there: a proof up to the rounding of that restriction only. ``False``
+    means "not proven" (also when the ``budget`` runs out; ``stats`` says so).
     """
     from .polytope import Polytope
 
@@ -174,7 +216,7 @@ def flat_subset_of_union(P: Polytope, U: PolytopeUnion) -> bool:
             members.append(Mt)
     box = np.stack([T.min(axis=0), T.max(axis=0)], axis=-1)[None]
     hard = [(R.A @ Q, R.b - R.A @ o)]
-    return _uncovered(members, box, T.mean(axis=0)[None], hard)[0] is None
+    return _uncovered(members, box, T.mean(axis=0)[None], hard, budget, stats)[0] is None
 
 
 def difference(P: Polytope, other: Any) -> PolytopeUnion:

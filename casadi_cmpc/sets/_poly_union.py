@@ -5,12 +5,19 @@
 covering engine :func:`_uncovered`: the region minus the members is split into pieces,
 and a piece is dropped only with a certificate that it has no interior point
 (:func:`_prune_pieces`: stacked LPs whose multipliers are checked rigorously).
+
+The number of pieces can grow exponentially with the number of members, so every proof
+has a budget (:class:`CoverBudget`: pieces alive, pieces handed to the LP, optionally
+seconds). A proof that runs out of budget answers "not proven", exactly like an
+undecided piece: no caller reads it as "not a subset".
 """
 
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,7 +32,33 @@ from .box import Box
 if TYPE_CHECKING:
     from .polytope import Polytope
 
-__all__ = ["PolytopeUnion"]
+__all__ = ["CoverBudget", "PolytopeUnion"]
+
+
+@dataclass(frozen=True)
+class CoverBudget:
+    """Limits of one run of the covering engine (:func:`_uncovered`).
+
+    When a limit would be passed, the regions still undecided are answered "not proven"
+    (a point is returned for them, as for an undecided piece), never "proven not
+    covered".
+
+    Parameters
+    ----------
+    max_pieces : int
+        Pieces alive at once (all regions of the call together).
+    max_lps : int
+        Pieces handed to the pruning LPs in the whole call.
+    max_seconds : float or None
+        Wall-clock limit of the call (None: none; results then repeat from run to run).
+    """
+
+    max_pieces: int = 4096
+    max_lps: int = 20_000
+    max_seconds: float | None = None
+
+
+DEFAULT_BUDGET = CoverBudget()
 
 
 class PolytopeUnion(SetBase):
@@ -147,7 +180,8 @@ class PolytopeUnion(SetBase):
         ``True`` is therefore a proof of ``box ⊆ P_1 ∪ ... ∪ P_p`` for the stored
         ``(A_i, b_i)``; ``False`` means "not proven": the box has a point outside the
         union, or it could not be decided (e.g. a gap or overlap between members at the
-        level of rounding, or a box of zero width). The witness of a ``False`` is a point
+        level of rounding, a box of zero width, or the proof ran out of its budget,
+        :class:`CoverBudget`). The witness of a ``False`` is a point
         of the box outside every member when one was found (stage 2, or an LP point of
         an undecided piece, which may lie on the boundary of a member).
 
@@ -365,7 +399,8 @@ class PolytopeUnion(SetBase):
 
 # ===================================================== the covering engine
 def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
-               hard: list[tuple[np.ndarray, np.ndarray]] | None = None
+               hard: list[tuple[np.ndarray, np.ndarray]] | None = None,
+               budget: CoverBudget | None = None, stats: dict[str, Any] | None = None
                ) -> list[np.ndarray | None]:
     """For each region, None when ``region ⊆ ∪ members`` is proven, else a point.
 
@@ -387,14 +422,29 @@ def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
     hard : list of (A, b), optional
         Extra raw rows of each region (e.g. a full-dimensional polytope inside its
         bounding box).
+    budget : CoverBudget, optional
+        Limits of the call (default :data:`DEFAULT_BUDGET`). A region still undecided
+        when a limit would be passed gets a point ("not proven").
+    stats : dict, optional
+        Filled with ``exhausted`` (bool: the budget ended the call), ``lp_pieces`` (pieces
+        handed to the LPs), ``max_alive`` and ``refuted`` (regions stopped early because
+        an interior LP point of a piece lies outside every member, in floating point).
 
     Returns
     -------
     list of (ndarray (n,) or None)
-        A returned point lies in a piece that is not proven empty: it is usually outside
-        every member, but not necessarily so (an undecided piece).
+        None only for a region proven covered. A returned point lies in a piece that is
+        not proven empty: it is usually outside every member, but not necessarily so (an
+        undecided piece, or the budget ran out).
     """
     K, n = boxes.shape[0], boxes.shape[1]
+    budget = DEFAULT_BUDGET if budget is None else budget
+    st: dict[str, Any] = {"exhausted": False, "lp_pieces": 0, "max_alive": 0, "refuted": 0}
+    if stats is not None:
+        stats.clear()
+        stats.update(st)
+        st = stats
+    t_start = time.perf_counter()
     if hard is None:
         hard = [(np.zeros((0, n)), np.zeros(0))] * K
     flat = ~(boxes[..., 1] > boxes[..., 0]).all(axis=1)
@@ -442,14 +492,46 @@ def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
                 new_k.append(k)
                 new_A.append(np.concatenate((A_p, negA[j:j + 1], PR.A[J[:t]])))
                 new_b.append(np.concatenate((b_p, negb[j:j + 1], PR.b[J[:t]])))
+        over = (len(new_k) + len(kk) > budget.max_pieces
+                or st["lp_pieces"] + len(new_k) > budget.max_lps
+                or (budget.max_seconds is not None
+                    and time.perf_counter() - t_start > budget.max_seconds))
+        if over:  # "not proven" for every region still open, with its latest point
+            st["exhausted"] = True
+            for k, c_p in zip(piece_k, piece_c, strict=True):
+                if out[k] is None:
+                    out[k] = np.asarray(c_p, dtype=float)
+            return out
         if new_k:
-            gone, X = _prune_pieces(new_A, new_b, [hard[k] for k in new_k], boxes[new_k])
-            for idx in np.flatnonzero(~gone).tolist():
+            gone, X, rad = _prune_pieces(new_A, new_b, [hard[k] for k in new_k],
+                                         boxes[new_k])
+            st["lp_pieces"] += len(new_k)
+            keep = np.flatnonzero(~gone)
+            # a piece with an interior LP point outside every member: its region is not
+            # covered (up to floating point): stop working on it, answer the point
+            deep = keep[np.isfinite(rad[keep]) & (rad[keep] > 1e-6)]
+            if deep.size:
+                inside = np.zeros(deep.size, dtype=bool)
+                for M in members:
+                    inside |= np.asarray(M.contains(X[deep]), dtype=bool)
+                for idx in deep[~inside].tolist():
+                    k = new_k[idx]
+                    if out[k] is None:
+                        out[k] = np.asarray(X[idx], dtype=float)
+                        st["refuted"] += 1
+            for idx in keep.tolist():
+                if out[new_k[idx]] is not None:
+                    continue
                 kk.append(new_k[idx])
                 kA.append(new_A[idx])
                 kb.append(new_b[idx])
                 kc.append(X[idx])
-        piece_k, piece_A, piece_b, piece_c = kk, kA, kb, kc
+        keep_old = [i for i, k in enumerate(kk) if out[k] is None]
+        piece_k = [kk[i] for i in keep_old]
+        piece_A = [kA[i] for i in keep_old]
+        piece_b = [kb[i] for i in keep_old]
+        piece_c = [kc[i] for i in keep_old]
+        st["max_alive"] = max(st["max_alive"], len(piece_k))
     for k, c in zip(piece_k, piece_c, strict=True):
         if out[k] is None:
             out[k] = np.asarray(c, dtype=float)
@@ -458,7 +540,7 @@ def _uncovered(members: list[Polytope], boxes: np.ndarray, centres: np.ndarray,
 
 def _prune_pieces(As: list[np.ndarray], bs: list[np.ndarray],
                   hard: list[tuple[np.ndarray, np.ndarray]], boxes: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which pieces ``{x in box : A x < b (soft, strict), H x <= g (hard)}`` are empty.
 
     One stacked LP (HiGHS) per batch, in the coordinates ``u`` of the box mapped to
@@ -483,6 +565,9 @@ def _prune_pieces(As: list[np.ndarray], bs: list[np.ndarray],
     X : ndarray, shape (K, n)
         The LP points (a point of each piece that is not proven empty, when its LP
         value is positive).
+    r : ndarray, shape (K,)
+        The LP values (distance of the point to the soft rows in the unit coordinates;
+        +inf where the LP did not end optimal), a floating-point hint only.
     """
     K = len(As)
     n = boxes.shape[1]
@@ -530,7 +615,7 @@ def _prune_pieces(As: list[np.ndarray], bs: list[np.ndarray],
     gone = np.zeros(K, dtype=bool)
     cand = np.flatnonzero(opt & (r <= 1e-6))
     if cand.size == 0 or m == 0:
-        return gone, X
+        return gone, X, r
     Y = np.zeros((K, m))
     Y[valid] = res.y
     Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0) / nu
@@ -541,4 +626,4 @@ def _prune_pieces(As: list[np.ndarray], bs: list[np.ndarray],
     Yc = Y[cand]
     proven = _certify_separation(Yc, Apad[cand], bpad[cand], boxes[cand], strict=False)
     gone[cand] = proven & ok_soft[cand]
-    return gone, X
+    return gone, X, r
