@@ -489,9 +489,17 @@ def one_step_set(model: Model, target: Any, eps: float, *, robust: bool = False,
         ``True``: ``exists u in U, for all w in W: f(x, u, w) in T`` (the control may depend
         on the state, never on w). ``False``: w fixed at the centre of W (no effect for a
         model without disturbance).
-    method : {"auto", "general", "modal"}
-        ``"general"`` (the default of ``"auto"``): the nested state × control search of
-        Alg 4.6/6.1, with a proving control per inner box. ``"modal"``: quantified set
+    method : {"auto", "general", "modal", "affine_state"}
+        ``"auto"``: ``"affine_state"`` for a model with an affine state part (some states
+        enter f only linearly, :attr:`Model.nonlinear_states`), a polytopic target and no
+        obstacles; ``"general"`` otherwise (the result's ``method`` says which ran).
+        ``"general"``: the nested state × control search of
+        Alg 4.6/6.1, with a proving control per inner box. ``"affine_state"`` (thesis
+        §6.2, Alg 6.4): only the nonlinear states and U are gridded (cells of the width a
+        bisection to eps reaches; controls: the midpoints of the dyadic cells of U down to
+        ``u_eps``), and the set is a union of polytope pieces (``res.pieces``), each with
+        its proving control (``res.witness``); it runs in this process (``executor`` is
+        not used) and ``max_boxes`` bounds its (cell, control) pairs. ``"modal"``: quantified set
         inversion with modal intervals (Alg 5.2, :func:`casadi_cmpc.quantified_sivia`),
         which proves the **weaker** ``for all w exists u`` (u may depend on w) and gives no
         control; only for one Polytope or Box target.

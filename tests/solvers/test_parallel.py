@@ -73,8 +73,8 @@ def _three_state() -> tuple[cm.Model, cm.Polytope]:
 
 def test_one_step_set_on_a_process_pool_equals_the_serial_run(pool):
     m, T = _three_state()
-    A = cm.one_step_set(m, T, 0.1, progress=False)
-    B = cm.one_step_set(m, T, 0.1, progress=False, executor=pool)
+    A = cm.one_step_set(m, T, 0.1, method="general", progress=False)
+    B = cm.one_step_set(m, T, 0.1, method="general", progress=False, executor=pool)
     assert A.paving.n_inner > 0 and _same_paving(A.paving, B.paving)
     assert np.array_equal(A.witness, B.witness)  # the proving controls came back in order
     assert A.n_pairs == B.n_pairs
