@@ -136,6 +136,44 @@ def _undominated(C: np.ndarray) -> np.ndarray:
     return ~dom.any(axis=1)
 
 
+def _polytope(A: np.ndarray, b: np.ndarray) -> Polytope:
+    """A Polytope of rows built here (finite, shapes checked by construction), without the
+    validation of the public constructor; A is shared read-only by the pieces."""
+    P = object.__new__(Polytope)
+    if A.flags.writeable:
+        A.setflags(write=False)
+    b = np.array(b, dtype=float)
+    b.setflags(write=False)
+    P.A, P.b, P._cache = A, b, {}
+    return P
+
+
+def _useful_intervals(a: np.ndarray, C: np.ndarray, D_lin: Box) -> list[tuple[int, int]]:
+    """:func:`_useful` with one linear state for every cell at once: C (nb, k, t) offsets,
+    a (t,) the rows' coefficients of x_L. Returns (cell, candidate) pairs whose interval
+    ``{x in D_L : a x <= C[cell, k]}`` is not empty and not inside another kept one of the
+    same cell."""
+    nb, k, _ = C.shape
+    ok = np.isfinite(C).all(axis=2) & ~np.any((a == 0) & (C < 0), axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = C / np.where(a == 0, 1.0, a)
+    hi = np.minimum(float(D_lin.hi[0]), np.where(a > 0, q, np.inf).min(axis=2))
+    lo = np.maximum(float(D_lin.lo[0]), np.where(a < 0, q, -np.inf).max(axis=2))
+    ok &= hi > lo
+    lo = np.where(ok, lo, np.inf)
+    hi = np.where(ok, hi, -np.inf)
+    # inside[c, i, j]: candidate i's interval inside j's (equal ones: keep the first)
+    inside = (lo[:, None, :] <= lo[:, :, None]) & (hi[:, :, None] <= hi[:, None, :])
+    same = (lo[:, None, :] == lo[:, :, None]) & (hi[:, None, :] == hi[:, :, None])
+    earlier = np.tril(np.ones((k, k), dtype=bool), -1)
+    inside &= ~same | earlier[None]
+    inside &= ~np.eye(k, dtype=bool)[None]
+    inside &= ok[:, None, :]  # only kept intervals absorb others
+    keep = ok & ~inside.any(axis=2)
+    cells, cands = np.nonzero(keep)
+    return list(zip(cells.tolist(), cands.tolist(), strict=True))
+
+
 def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
     """Indices of the candidates worth keeping among the x_L slices
     ``{x_L in D_L : M x_L <= C[k]}`` of one x_NL box (C: (k, t)): those with interior, less
@@ -301,17 +339,19 @@ def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: floa
             with np.errstate(invalid="ignore", over="ignore"):
                 cc = np.nextafter(np.nextafter(h - ub, -np.inf) - s, -np.inf)
             cc = np.where(np.isnan(cc), -np.inf, cc).reshape(nb, C, -1)
-            for i in range(nb):
-                keep = _useful(M, cc[i], D_lin)
+            if M.shape[1] == 1:  # intervals: all cells at once
+                kept = _useful_intervals(M[:, 0], cc, D_lin)
+            else:
+                kept = [(i, k) for i in range(nb) for k in _useful(M, cc[i], D_lin)]
+            for i, k in kept:
                 box = B[i]
                 lo_b, hi_b = D.lo.copy(), D.hi.copy()
                 lo_b[nl_l], hi_b[nl_l] = box[:, 0], box[:, 1]
-                for k in keep:
-                    pieces.append(Polytope(Afull, np.concatenate([cc[i, k], hi_b, -lo_b])))
-                    offs.append(cc[i, k].copy())
-                    wit.append(ctrl[k])
-                    mem.append(j)
-                    bix.append(start + i)
+                pieces.append(_polytope(Afull, np.concatenate([cc[i, k], hi_b, -lo_b])))
+                offs.append(cc[i, k].copy())
+                wit.append(ctrl[k])
+                mem.append(j)
+                bix.append(start + i)
     return {"pieces": pieces, "offsets": offs, "rows": [r[2] for r in rows],
             "D_lin": D_lin,
             "witness": np.asarray(wit, dtype=float).reshape(len(wit), model.m),
