@@ -252,7 +252,9 @@ def _hull_in_flat(P: np.ndarray, origin: np.ndarray, U: np.ndarray
         return A, vidx, None
     if r == 1:  # a segment (or an interval when n = 1): its two end points
         U = np.eye(1) if n == 1 else U  # n = 1: keep the axis, the facets stay exact
-        z = ((P - origin) @ U)[:, 0]
+        # n = 1: the coordinates themselves (subtracting the origin would round points
+        # that differ by less than an ulp of it onto each other and lose an end point)
+        z = P[:, 0] if n == 1 else ((P - origin) @ U)[:, 0]
         return (np.array([[1.0], [-1.0]]),
                 np.unique([int(np.argmax(z)), int(np.argmin(z))]), U)
     if r == n:  # full-dimensional: no rotation (keeps axis-aligned facets exact)
