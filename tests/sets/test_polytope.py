@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
 
@@ -618,6 +618,7 @@ def test_docstring_examples():
 
 @settings(max_examples=60, deadline=None)
 @given(pts=st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=1, max_size=12))
+@example(pts=[0.0, 1.2712347629046543e-70, -1.0, -2.0])  # an end point within an ulp of 0
 def test_hull_of_points_in_one_dimension_is_their_interval(pts):
     """n = 1: the hull of points is [min, max] exactly (no Qhull, which needs 2-D data),
     and the hull of intervals is the interval from the smallest to the largest end."""
