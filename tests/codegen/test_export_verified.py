@@ -196,7 +196,7 @@ def test_no_false_verified_flag_on_a_cancelling_offset(robust, polytopic, tmp_pa
     assert enclosure_misses(C, points) == []
 
 
-@settings(max_examples=4, deadline=None, derandomize=True,
+@settings(max_examples=2, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(exponent=st.floats(8.0, 16.0), extra=st.integers(6, 14), n=st.sampled_from([2, 3]),
        polytopic=st.booleans(), seed=st.integers(0, 2 ** 16))

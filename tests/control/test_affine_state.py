@@ -141,7 +141,7 @@ def _random_model(seed: int):
                     U=cm.Box([-1], [1]), W=cm.Box([-0.01], [0.01]), name="rand3")
 
 
-@settings(max_examples=6, deadline=None)
+@settings(max_examples=4, deadline=None)
 @given(seed=st.integers(0, 10_000), r=st.floats(0.3, 0.8), c=st.floats(-0.2, 0.2))
 def test_three_states_two_linear_pieces_verified_by_sampling(seed, r, c):
     m = _random_model(seed)
