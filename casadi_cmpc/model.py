@@ -672,10 +672,13 @@ class Model:
         The other states form the affine state part of thesis §6.2:
         ``f = A x + g(x_NL, u, w)`` with ``A`` = :attr:`affine_state_matrix`.
         """
-        J = self._sjac("x")
-        syms = self._all_syms()
-        jump = self._jump_inputs()[3]
-        return tuple(j for j in range(self.n) if self._depends(J[:, j], syms) or j in jump)
+        def build() -> tuple[int, ...]:
+            J = self._sjac("x")
+            syms = self._all_syms()
+            jump = self._jump_inputs()[3]
+            return tuple(j for j in range(self.n)
+                         if self._depends(J[:, j], syms) or j in jump)
+        return self._cached("nonlinear_states", build)
 
     @property
     def linear_states(self) -> tuple[int, ...]:

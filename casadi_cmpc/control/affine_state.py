@@ -148,6 +148,13 @@ def _polytope(A: np.ndarray, b: np.ndarray) -> Polytope:
     return P
 
 
+def _polytope_row(A: np.ndarray, b: np.ndarray) -> Polytope:
+    """:func:`_polytope` for a read-only A and a read-only row b (used as it is)."""
+    P = object.__new__(Polytope)
+    P.A, P.b, P._cache = A, b, {}
+    return P
+
+
 def _useful_intervals(a: np.ndarray, C: np.ndarray, D_lin: Box) -> list[tuple[int, int]]:
     """:func:`_useful` with one linear state for every cell at once: C (nb, k, t) offsets,
     a (t,) the rows' coefficients of x_L. Returns (cell, candidate) pairs whose interval
@@ -343,18 +350,28 @@ def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: floa
                 kept = _useful_intervals(M[:, 0], cc, D_lin)
             else:
                 kept = [(i, k) for i in range(nb) for k in _useful(M, cc[i], D_lin)]
-            for i, k in kept:
-                box = B[i]
-                lo_b, hi_b = D.lo.copy(), D.hi.copy()
-                lo_b[nl_l], hi_b[nl_l] = box[:, 0], box[:, 1]
-                pieces.append(_polytope(Afull, np.concatenate([cc[i, k], hi_b, -lo_b])))
-                offs.append(cc[i, k].copy())
-                wit.append(ctrl[k])
-                mem.append(j)
-                bix.append(start + i)
+            if not kept:
+                continue
+            ci, ck = np.asarray(kept, dtype=int).T
+            K = ci.size
+            off = cc[ci, ck]  # (K, t), a fresh array: the pieces' offsets are its rows
+            lo_b = np.broadcast_to(D.lo, (K, n)).copy()
+            hi_b = np.broadcast_to(D.hi, (K, n)).copy()
+            lo_b[:, nl_l], hi_b[:, nl_l] = B[ci, :, 0], B[ci, :, 1]
+            bvec = np.concatenate([off, hi_b, -lo_b], axis=1)
+            bvec.setflags(write=False)  # rows are read-only views, shared by nothing else
+            off.setflags(write=False)
+            if Afull.flags.writeable:
+                Afull.setflags(write=False)
+            pieces.extend(_polytope_row(Afull, b) for b in bvec)
+            offs.extend(off)
+            wit.append(ctrl[ck])
+            mem.extend([j] * K)
+            bix.extend((start + ci).tolist())
     return {"pieces": pieces, "offsets": offs, "rows": [r[2] for r in rows],
             "D_lin": D_lin,
-            "witness": np.asarray(wit, dtype=float).reshape(len(wit), model.m),
+            "witness": (np.concatenate(wit, axis=0) if wit
+                        else np.zeros((0, model.m))).reshape(-1, model.m),
             "member": np.asarray(mem, dtype=int), "box": np.asarray(bix, dtype=int),
             "boxes": boxes, "nl": nl, "lin": lin, "n_pairs": n_pairs,
             "complete": complete, "seconds": time.perf_counter() - t0}
