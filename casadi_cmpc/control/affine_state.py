@@ -24,6 +24,8 @@ import numpy as np
 
 from ..exceptions import DimensionError, ModelError
 from ..model import Model
+from ..sets import _lp
+from ..sets._poly_lp import RTOL
 from ..sets._zono_num import imatmul
 from ..sets.box import Box
 from ..sets.polytope import Polytope, PolytopeUnion
@@ -123,17 +125,19 @@ def _member_rows(members: list[Polytope], A: np.ndarray, D_lin: Box
     return out
 
 
-def _undominated(C: np.ndarray) -> np.ndarray:
-    """Rows of C (k, t) not dominated by another (``C[j] >= C[i]`` everywhere, strictly
-    somewhere, or equal with a smaller index): with equal normals, the piece of a dominated
-    offset lies inside the piece of the dominating one. Returns a bool mask (k,)."""
-    ge = (C[None, :, :] >= C[:, None, :]).all(axis=2)  # ge[i, j]: C[j] >= C[i]
-    gt = (C[None, :, :] > C[:, None, :]).any(axis=2)
-    k = C.shape[0]
+def _undominated(C: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Per cell, the candidates (rows of C (nb, k, t)) with ``ok`` (nb, k) not dominated
+    by another ok one of the same cell (``C[j] >= C[i]`` everywhere, strictly somewhere,
+    or equal with a smaller index): with equal normals, the piece of a dominated offset
+    lies inside the piece of the dominating one. Returns a bool mask (nb, k)."""
+    k = C.shape[1]
+    Cj = np.where(ok[..., None], C, -np.inf)  # a candidate not kept dominates nothing
+    ge = (Cj[:, None, :, :] >= C[:, :, None, :]).all(axis=3)  # ge[c, i, j]: C[j] >= C[i]
+    gt = (Cj[:, None, :, :] > C[:, :, None, :]).any(axis=3)
     earlier = np.tril(np.ones((k, k), dtype=bool), -1)  # earlier[i, j]: j < i
-    dom = ge & (gt | earlier)
-    np.fill_diagonal(dom, False)
-    return ~dom.any(axis=1)
+    dom = ge & (gt | earlier[None]) & ok[:, None, :]
+    dom &= ~np.eye(k, dtype=bool)[None]
+    return ok & ~dom.any(axis=2)
 
 
 def _polytope(A: np.ndarray, b: np.ndarray) -> Polytope:
@@ -181,53 +185,59 @@ def _useful_intervals(a: np.ndarray, C: np.ndarray, D_lin: Box) -> list[tuple[in
     return list(zip(cells.tolist(), cands.tolist(), strict=True))
 
 
-def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
-    """Indices of the candidates worth keeping among the x_L slices
-    ``{x_L in D_L : M x_L <= C[k]}`` of one x_NL box (C: (k, t)): those with interior, less
-    those inside another kept slice. With one linear state the slices are intervals,
-    computed exactly in floating point and pruned by containment; otherwise a slice is
-    kept when its Chebyshev ball is not empty (LP) and its offsets are not dominated. Only
-    the size of the approximation depends on this choice (a dropped slice is never
-    needed for soundness)."""
-    ok = np.isfinite(C).all(axis=1)
-    idx = np.flatnonzero(ok)
-    if idx.size == 0:
-        return idx
-    if M.shape[1] == 1:
-        a = M[:, 0]
-        Ck = C[idx]
-        if np.any((a == 0)[None, :] & (Ck < 0), axis=1).any():
-            idx = idx[~np.any((a == 0)[None, :] & (Ck < 0), axis=1)]
-            Ck = C[idx]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            q = Ck / np.where(a == 0, 1.0, a)[None, :]
-        hi = np.minimum(float(D_lin.hi[0]), np.where(a > 0, q, np.inf).min(axis=1))
-        lo = np.maximum(float(D_lin.lo[0]), np.where(a < 0, q, -np.inf).max(axis=1))
-        good = hi > lo
-        idx, lo, hi = idx[good], lo[good], hi[good]
-        if idx.size <= 1:
-            return idx
-        inside = (lo[None, :] <= lo[:, None]) & (hi[:, None] <= hi[None, :])  # i in j
-        same = (lo[None, :] == lo[:, None]) & (hi[None, :] == hi[:, None])
-        k = idx.size
-        inside &= ~same | np.tril(np.ones((k, k), dtype=bool), -1)  # a copy: keep the first
-        np.fill_diagonal(inside, False)
-        return idx[~inside.any(axis=1)]
+def _useful(M: np.ndarray, C: np.ndarray, D_lin: Box) -> list[tuple[int, int]]:
+    """(cell, candidate) pairs worth keeping among the x_L slices
+    ``{x_L in D_L : M x_L <= C[cell, k]}`` (C: (nb, k, t)), with several linear states:
+    a slice is kept when its offsets are finite and not below the rows' minimum over D_L,
+    it is not dominated by another of its cell (:func:`_undominated`) and it has an
+    interior (a point found by projections, else a Chebyshev LP; all cells at once).
+    Only the size of the approximation depends on this choice (a dropped slice is never
+    needed for soundness). One linear state: :func:`_useful_intervals`."""
     # a row whose offset is below its minimum over D_L leaves nothing (exact necessary test)
     low = (np.minimum(M * D_lin.lo, M * D_lin.hi)).sum(axis=1)
-    idx = idx[(C[idx] >= low).all(axis=1)]
-    if idx.size == 0:
-        return idx
-    idx = idx[_undominated(C[idx])]
-    if idx.size == 0:
-        return idx
-    inside = _interior_point(M, C[idx], D_lin)
+    ok = np.isfinite(C).all(axis=2) & (C >= low).all(axis=2)
+    if ok.any():
+        ok = _undominated(C, ok)
+    cells, cands = np.nonzero(ok)
+    if cells.size:
+        Ck = C[cells, cands]
+        inside = _interior_point(M, Ck, D_lin)
+        if not inside.all():
+            inside[~inside] = _chebyshev_positive(M, Ck[~inside], D_lin)
+        cells, cands = cells[inside], cands[inside]
+    return list(zip(cells.tolist(), cands.tolist(), strict=True))
+
+
+def _chebyshev_positive(M: np.ndarray, C: np.ndarray, D_lin: Box) -> np.ndarray:
+    """Whether ``{x in D_L : M x <= C[k]}`` has a Chebyshev ball of radius above
+    ``RTOL`` times D_L's largest half-width, per row of C (K, t): all K Chebyshev LPs in
+    one batched HiGHS call. Only sizes the list of pieces (nothing is claimed from it)."""
+    K, t = C.shape
     n_l = M.shape[1]
+    nrm = np.linalg.norm(M, axis=1)
+    live = nrm > 0  # zero rows passed the offset test: satisfied on all of D_L
+    Mn = M[live] / nrm[live, None]
     I = np.eye(n_l)
-    keep = [k for k, ok in zip(idx, inside, strict=True)
-            if ok or Polytope(np.vstack([M, I, -I]),
-                              np.concatenate([C[k], D_lin.hi, -D_lin.lo])).is_full_dimensional()]
-    return np.asarray(keep, dtype=int)
+    # rows (a, ||a||) . (x, r) <= b: the scaled rows, then x + r <= hi and -x + r <= -lo
+    A1 = np.vstack([np.hstack([Mn, np.ones((Mn.shape[0], 1))]),
+                    np.hstack([I, np.ones((n_l, 1))]), np.hstack([-I, np.ones((n_l, 1))])])
+    R = A1.shape[0]
+    b = np.concatenate([C[:, live] / nrm[live],
+                        np.broadcast_to(D_lin.hi, (K, n_l)),
+                        np.broadcast_to(-D_lin.lo, (K, n_l))], axis=1)
+    half = float(np.max(0.5 * (D_lin.hi - D_lin.lo), initial=0.0))
+    obj = np.zeros((K, n_l + 1))
+    obj[:, -1] = -1.0  # maximise r
+    ub = np.full((K, n_l + 1), np.inf)
+    ub[:, -1] = max(half, 1.0)
+    lb = np.full((K, n_l + 1), -np.inf)
+    # r may go negative (an empty slice): every LP of the batch is feasible, so that the
+    # stacked LP is solved in one piece (one infeasible block would make it infeasible)
+    xm = float(np.linalg.norm(np.maximum(np.abs(D_lin.lo), np.abs(D_lin.hi))))
+    lb[:, -1] = -(np.abs(b).max(axis=1) + xm + 1.0)
+    res = _lp.block_lp(obj, np.tile(A1, (K, 1)), b.ravel(),
+                       np.repeat(np.arange(K), R), lb, ub)
+    return (res.status == _lp.OPTIMAL) & (-res.fun > RTOL * max(half, np.finfo(float).tiny))
 
 
 def _interior_point(M: np.ndarray, C: np.ndarray, D_lin: Box, sweeps: int = 30) -> np.ndarray:
@@ -349,7 +359,7 @@ def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: floa
             if M.shape[1] == 1:  # intervals: all cells at once
                 kept = _useful_intervals(M[:, 0], cc, D_lin)
             else:
-                kept = [(i, k) for i in range(nb) for k in _useful(M, cc[i], D_lin)]
+                kept = _useful(M, cc, D_lin)
             if not kept:
                 continue
             ci, ck = np.asarray(kept, dtype=int).T
