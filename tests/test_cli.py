@@ -1,4 +1,7 @@
+import contextlib
+import io
 import json
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -31,6 +34,59 @@ def cache(tmp_path_factory):
     return str(d)
 
 
+# the builds of the exported examples (make and the C compiler, the longest part of
+# test_export_every_listed_example) run on one background thread while the Python tests of
+# this module go on; every test that changes PATH or CC waits for them first
+_BUILDS: list[Future] = []
+
+
+def _wait_for_builds() -> None:
+    for fut in _BUILDS:
+        fut.exception()  # wait (a failed build is reported by the test of its example)
+
+
+@pytest.fixture(scope="module")
+def exports(tmp_path_factory, cache):
+    """``cmpc export`` of every listed example, each into its own directory, with the
+    options of test_export_every_listed_example; the build of libcmpc.so of each export
+    (when a C compiler is available) is started at once on a background thread.
+
+    Returns a dict ``name -> (exit code, stdout, stderr, directory, build future or None)``,
+    or ``name -> exception`` when the export raised (raised again by the test of that
+    example). Contractive examples are exported first: their builds take longest and then
+    overlap with the computation of the set sequences (which the run tests read from the
+    cache)."""
+    from casadi_cmpc.codegen.export import build
+
+    names = cm.models.names()
+    order = ([n for n in names if n not in SEQUENCE_EXAMPLES]
+             + [n for n in names if n in SEQUENCE_EXAMPLES])
+    builder = ThreadPoolExecutor(max_workers=1)
+    out = {}
+    try:
+        for name in order:
+            d = tmp_path_factory.mktemp(f"export_{name}") / "c"
+            # the structured examples' own controllers: tests/test_cli_structured.py
+            controller = "contractive" if name in STRUCTURED_EXAMPLES else "auto"
+            so, se = io.StringIO(), io.StringIO()
+            try:
+                with contextlib.redirect_stdout(so), contextlib.redirect_stderr(se):
+                    code = main(["export", name, "--out", str(d), "--cache", cache,
+                                 "--no-progress", "--controller", controller])
+            except Exception as exc:  # noqa: BLE001 - reported by the example's own test
+                out[name] = exc
+                continue
+            fut = None
+            if code == 0 and can_build():
+                fut = builder.submit(build, d, "libcmpc.so")
+                _BUILDS.append(fut)
+            out[name] = (code, so.getvalue(), se.getvalue(), d, fut)
+        yield out
+    finally:
+        builder.shutdown(wait=True)
+        _BUILDS.clear()
+
+
 def test_the_set_pipeline_covers_e8_e9_e10_e14():
     assert SEQUENCE_EXAMPLES == ["cstr", "cannon", "cannon_robust", "cannon_robust_wide"]
     assert STRUCTURED_EXAMPLES == ["khalil_affine_state", "khalil_affine_control"]
@@ -43,7 +99,7 @@ RUNS = ([(n, "auto") for n in cm.models.names() if n not in STRUCTURED_EXAMPLES]
 
 
 @pytest.mark.parametrize("name, controller", RUNS)
-def test_run_every_listed_example(name, controller, tmp_path, capsys, cache):
+def test_run_every_listed_example(name, controller, tmp_path, capsys, cache, exports):
     """Every example that ``cmpc list`` shows runs with each controller it has, exits 0 and
     writes its outputs."""
     steps = STEPS.get(name, 6)
@@ -170,21 +226,20 @@ def test_unwritable_out_is_refused_before_running(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("name", cm.models.names())
-def test_export_every_listed_example(name, tmp_path, capsys, cache):
+def test_export_every_listed_example(name, cache, exports):
     """``cmpc export`` writes the C sources of every example's controller (the sequence
-    examples from the cached sets); the header names the example's dimensions."""
-    out = tmp_path / "c"
-    # the structured examples' own controllers: tests/test_cli_structured.py
+    examples from the cached sets); the header names the example's dimensions. (The export
+    and the start of its build: the ``exports`` fixture.)"""
+    if isinstance(exports[name], BaseException):
+        raise exports[name]
+    code, _, err, out, build = exports[name]
     controller = "contractive" if name in STRUCTURED_EXAMPLES else "auto"
-    code = main(["export", name, "--out", str(out), "--cache", cache, "--no-progress",
-                 "--controller", controller])
-    text = capsys.readouterr()
     ex = cm.models.load(name)
     if ex.info["mpc"].get("solver") == "lp" and name not in SEQUENCE_EXAMPLES:
         # the LP form has no C export: a clear refusal, nothing written
-        assert code == 2 and "solver='lp'" in text.err and not out.exists()
+        assert code == 2 and "solver='lp'" in err and not out.exists()
         return
-    assert code == 0, text.err
+    assert code == 0, err
     hdr = (out / "cmpc_controller.h").read_text()
     assert f"#define CMPC_NX {ex.model.n}" in hdr and f"#define CMPC_NU {ex.model.m}" in hdr
     kind = "set_sequence" if name in SEQUENCE_EXAMPLES else "contractive"
@@ -197,7 +252,8 @@ def test_export_every_listed_example(name, tmp_path, capsys, cache):
     from casadi_cmpc.codegen import load
 
     ctrl = export_controller(ex, controller, cache=cache, progress=False)
-    C = load(out)
+    build.result()  # make of libcmpc.so (raises what build raises)
+    C = load(out, build_first=False)
     x0s = np.asarray(ex.info.get("run", {}).get("x0s", ex.x0s), dtype=float)
     x = xc = x0s.reshape(-1, ex.model.n)[0]
     rng = np.random.default_rng(0)
@@ -241,6 +297,7 @@ def test_export_build_without_make_is_refused_before_computing(tmp_path, monkeyp
             raise AssertionError(f"{what} called")
         return f
 
+    _wait_for_builds()  # no background build may see the PATH set below
     monkeypatch.setattr(cli, "export_controller", record("export_controller"))
     monkeypatch.setattr(cli, "_controller", record("_controller"))
     monkeypatch.setattr(cm.models, "load", record("models.load"))

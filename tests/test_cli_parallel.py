@@ -22,8 +22,19 @@ def small_tasks(monkeypatch):
     monkeypatch.setattr(_parallel, "TARGET_S", 0.002)  # the E8 levels are small
 
 
-def test_run_with_workers_and_on_a_dask_cluster_gives_the_serial_sets(tmp_path, capsys):
-    serial, pooled, dasked = tmp_path / "serial", tmp_path / "pool", tmp_path / "dask"
+@pytest.fixture(scope="module")
+def serial_cache(tmp_path_factory):
+    """The session's cache of set sequences (shared with tests/test_cli.py and
+    tests/codegen/test_export.py, which run them serially): the serial E8 sequence is
+    computed once per session, by whichever test needs it first."""
+    d = tmp_path_factory.getbasetemp() / "cmpc_sequences"
+    d.mkdir(exist_ok=True)
+    return d
+
+
+def test_run_with_workers_and_on_a_dask_cluster_gives_the_serial_sets(tmp_path, capsys,
+                                                                      serial_cache):
+    serial, pooled, dasked = serial_cache, tmp_path / "pool", tmp_path / "dask"
     args = ["run", "cannon", "--steps", "3", "--no-progress"]
     assert main([*args, "--cache", str(serial)]) == 0
     assert main([*args, "--cache", str(pooled), "--workers", "2"]) == 0

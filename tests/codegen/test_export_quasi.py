@@ -6,10 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import casadi_cmpc as cm
 from casadi_cmpc.codegen import load
 from casadi_cmpc.codegen.export import can_build
-from casadi_cmpc.control.quasi import quasi_controllable_sets
 from casadi_cmpc.mpc.quasi import QuasiMultiStepMPC
 from casadi_cmpc.mpc.spec import QuasiSpec
 
@@ -18,10 +16,10 @@ needs_cc = pytest.mark.skipif(not can_build(),
 
 
 @pytest.fixture(scope="module")
-def e12(tmp_path_factory):
-    ex = cm.models.load("khalil_affine_control")
-    seqs = quasi_controllable_sets(ex.model, ex.terminal, steps=4, eps=0.05, max_sets=12,
-                                   until=ex.x0s)
+def e12(tmp_path_factory, e12_quasi4_sets):
+    # quasi 4-step sets at eps 0.05 until both initial states have a level: computed once per
+    # session (tests/conftest.py), shared with tests/mpc/test_quasi_mpc.py
+    ex, seqs = e12_quasi4_sets
     ctrl = QuasiMultiStepMPC(ex.model, seqs, P0=np.eye(2), Q=np.zeros((2, 2)), R=0.1,
                              local_law=ex.local_law, solver="sqp")
     d = tmp_path_factory.mktemp("quasi")

@@ -67,9 +67,72 @@ def exact_eval(fun: ca.Function, *args: Any) -> list[list[Fraction]]:
     return out
 
 
-def in_polytope(A: np.ndarray, b: np.ndarray, y: list[Fraction]) -> bool:
+def in_polytope_exact(A: np.ndarray, b: np.ndarray, y: list[Fraction]) -> bool:
+    """``A y <= b`` in rational arithmetic (A, b: doubles)."""
     return all(sum((Fraction(float(a)) * v for a, v in zip(A[r], y, strict=True)),
                    Fraction(0)) <= Fraction(float(b[r])) for r in range(len(b)))
+
+
+def in_polytope(A: np.ndarray, b: np.ndarray, y: list[Fraction]) -> bool:
+    """``A y <= b`` decided exactly: rows settled by floating point with a margin far above
+    its rounding error, the others (near their boundary) by :func:`in_polytope_exact`.
+
+    With y in the box [lo, hi] of doubles next to it (:func:`float_bracket`), the row a
+    lies between the real sums L = sum min(a lo, a hi) and U = sum max(a lo, a hi). Their
+    floating-point values differ from them by at most gamma_n S (S = sum |a| max(|lo|,
+    |hi|), gamma_n = n u / (1 - n u), u = 2^-53, plus underflow terms of 2^-1074 each);
+    the margin ``M = 1e-12 (S + |b| + 1)`` exceeds that and the rounding of ``b -+ M`` for
+    n <= 1000. So ``U_float <= b - M`` proves the row, ``L_float > b + M`` refutes it."""
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float)
+    n = A.shape[1]
+    if n > 1000 or not (np.isfinite(A).all() and np.isfinite(b).all()):
+        return in_polytope_exact(A, b, y)
+    lo, hi = np.array([float_bracket(v) for v in y]).T
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return in_polytope_exact(A, b, y)
+    with np.errstate(over="ignore", invalid="ignore"):
+        p, q = A * lo, A * hi
+        U = np.maximum(p, q).sum(axis=1)
+        L = np.minimum(p, q).sum(axis=1)
+        S = (np.abs(A) * np.maximum(np.abs(lo), np.abs(hi))).sum(axis=1)
+        M = 1e-12 * (S + np.abs(b) + 1.0)
+        proved = U <= b - M
+        refuted = L > b + M
+    if not (np.isfinite(S).all() and np.isfinite(M).all()):
+        return in_polytope_exact(A, b, y)
+    if refuted.any():
+        return False
+    rest = np.flatnonzero(~proved)
+    return in_polytope_exact(A[rest], b[rest], y)
+
+
+def float_bracket(v: Fraction) -> tuple[float, float]:
+    """The doubles ``lo <= v <= hi`` next to v: ``lo == hi == v`` when v is a double, else
+    two adjacent doubles with ``lo < v < hi`` (beyond the largest double: it and inf)."""
+    try:
+        f = float(v)  # int / int: correctly rounded
+    except OverflowError:
+        big = float(np.finfo(float).max)
+        return (big, np.inf) if v > 0 else (-np.inf, -big)
+    exact = Fraction(f)
+    if exact == v:
+        return f, f
+    return (f, float(np.nextafter(f, np.inf))) if exact < v else \
+        (float(np.nextafter(f, -np.inf)), f)
+
+
+def in_boxes(B: np.ndarray, y: list[Fraction]) -> bool:
+    """Exact membership of y in the union of the closed boxes B (N, n, 2) of doubles.
+
+    With y_d bracketed by adjacent doubles lo_d < y_d < hi_d, a double bound a satisfies
+    ``a <= y_d`` exactly when ``a <= lo_d`` and ``y_d <= a`` exactly when ``hi_d <= a`` (no
+    double lies strictly between lo_d and hi_d); when y_d is a double, lo_d = hi_d = y_d. So
+    the comparisons of doubles below decide the exact inclusion."""
+    if B.shape[0] == 0:
+        return False
+    lo, hi = np.array([float_bracket(v) for v in y]).T
+    return bool(np.any(np.all((B[:, :, 0] <= lo) & (hi <= B[:, :, 1]), axis=1)))
 
 
 def in_level(seq: Any, j: int, y: list[Fraction]) -> bool:
@@ -82,11 +145,8 @@ def in_level(seq: Any, j: int, y: list[Fraction]) -> bool:
         for M in _members(seq.sets[i]):
             if isinstance(M, cm.Polytope) and in_polytope(M.A, M.b, y):
                 return True
-        B = seq.steps[i - 1]["boxes"]
-        for box in B:
-            if all(Fraction(float(box[d, 0])) <= y[d] <= Fraction(float(box[d, 1]))
-                   for d in range(len(y))):
-                return True
+        if in_boxes(seq.steps[i - 1]["boxes"], y):
+            return True
     return False
 
 
@@ -279,3 +339,41 @@ def test_a_model_without_interval_rules_in_c_is_refused(tmp_path):
     with pytest.raises(ExportError, match="OP_ERFINV"):
         ctrl.export_c(tmp_path / "c")
     assert not (tmp_path / "c").exists()
+
+
+def test_exact_box_membership_at_and_between_doubles():
+    """in_boxes against the plain exact comparison, at the bounds, one ulp off them and at
+    values strictly between two doubles."""
+    a, b = 0.1, 0.30000000000000004
+    B = np.array([[[a, b], [-1.0, 1.0]]])
+    up = float(np.nextafter(b, np.inf))
+    eps = Fraction(1, 10 ** 30)
+    for y0 in (Fraction(a), Fraction(b), Fraction(a) - eps, Fraction(b) + eps,
+               Fraction(a) + eps, Fraction(b) - eps, Fraction(up),
+               (Fraction(b) + Fraction(up)) / 2, Fraction(1, 3), Fraction(10) ** 400,
+               -Fraction(10) ** 400):
+        y = [y0, Fraction(1)]
+        want = Fraction(a) <= y0 <= Fraction(b)
+        assert in_boxes(B, y) is want, y0
+    assert not in_boxes(np.zeros((0, 2, 2)), [Fraction(0), Fraction(0)])
+    assert in_boxes(np.array([[[0.0, np.inf], [-np.inf, 0.0]]]),
+                    [Fraction(10) ** 400, -Fraction(10) ** 400])
+
+
+def test_polytope_membership_agrees_with_rational_arithmetic():
+    """in_polytope (floating point with a margin, rational near the boundary) against
+    in_polytope_exact: random rows and points, points on a facet and a hair off it."""
+    rng = np.random.default_rng(7)
+    hair = Fraction(1, 2 ** 80)
+    for n in (1, 2, 3):
+        A = rng.normal(size=(6, n))
+        b = rng.uniform(0.1, 2.0, 6)
+        for _ in range(300):
+            y = [Fraction(float(v)) for v in rng.uniform(-2, 2, n)]
+            assert in_polytope(A, b, y) == in_polytope_exact(A, b, y)
+        for r in range(6):  # on facet r: a_r y = b_r exactly, then a hair outside/inside
+            y = [Fraction(0)] * n
+            y[0] = Fraction(float(b[r])) / Fraction(float(A[r, 0]))
+            for z in (y, [y[0] + hair * (1 if A[r, 0] > 0 else -1)] + y[1:],
+                      [y[0] - hair * (1 if A[r, 0] > 0 else -1)] + y[1:]):
+                assert in_polytope(A, b, z) == in_polytope_exact(A, b, z)

@@ -183,11 +183,14 @@ def test_affine_sequence_levels_decrease_along_stored_controls(e11):
         X = bb.lo + rng.random((3000, 2)) * (bb.hi - bb.lo)
         X = X[P.contains(X) & ~prev.contains(X)]
         pieces, wit = seq.steps[i - 1]["pieces"], seq.steps[i - 1]["witness"]
-        for x in X[:150]:
-            hit = [j for j, Q in enumerate(pieces) if Q.contains(x)]
-            assert hit, "a state of P_i outside P_{i-1} lies in no piece"
-            u = wit[hit[0]]
-            assert _successors_in(m, x[None], u[None], prev).all()
+        X = X[:150]
+        if X.shape[0] == 0:
+            continue
+        # (pieces, points): exact membership of every point in every piece
+        hit = np.array([Q.contains(X) for Q in pieces], dtype=bool).reshape(-1, X.shape[0])
+        assert hit.any(axis=0).all(), "a state of P_i outside P_{i-1} lies in no piece"
+        u = np.asarray(wit)[hit.argmax(axis=0)]  # the control of the first piece holding x
+        assert _successors_in(m, X, u, prev).all()
 
 
 def test_separating_approximation_of_the_pieces_is_proven_inside(e11):

@@ -19,8 +19,8 @@ from casadi_cmpc.sets._reach import reach
 
 
 @pytest.fixture(scope="module")
-def e12():
-    return cm.models.load("khalil_affine_control")
+def e12(e12_example):
+    return e12_example  # loaded once per session (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -13,15 +13,15 @@ from casadi_cmpc.mpc.quasi import QuasiMultiStepMPC
 
 
 @pytest.fixture(scope="module")
-def e12():
-    return cm.models.load("khalil_affine_control")
+def e12(e12_quasi4_sets):
+    return e12_quasi4_sets[0]
 
 
 @pytest.fixture(scope="module")
-def e12_sets(e12):
-    # coarse and fast: quasi 4-step sets until both initial states of Fig 6.15 have a level
-    return quasi_controllable_sets(e12.model, e12.terminal, steps=4, eps=0.05, max_sets=12,
-                                   until=e12.x0s)
+def e12_sets(e12_quasi4_sets):
+    # coarse and fast: quasi 4-step sets (eps 0.05) until both initial states of Fig 6.15
+    # have a level; computed once per session (tests/conftest.py), shared with the C export
+    return e12_quasi4_sets[1]
 
 
 @pytest.fixture(scope="module")
