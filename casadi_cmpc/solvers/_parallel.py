@@ -48,6 +48,8 @@ __all__ = ["LevelRunner", "TARGET_S"]
 
 TARGET_S = 0.1  # seconds of classification per task
 MIN_CHUNK = 64  # elements: below this a task is not worth sending
+#: seconds of classification at the split level below which a search is not cut into tasks
+SUBTREE_MIN_S = 0.002
 
 _WORKER_CACHE: OrderedDict[str, Any] = OrderedDict()  # classifier bytes hash -> classifier
 
@@ -100,6 +102,24 @@ def _classify_chunk(blob: bytes | None, key: str, chunk: Any) -> tuple[Any, Any,
     else:
         out = np.asarray(clf(chunk), dtype=np.int8)
     return out, getattr(chunk, "data", None), time.perf_counter() - t0
+
+
+def _subtree_run(clf: Any, frontier: Any, eps: float, keep_outer: bool, max_boxes: int,
+                 time_limit: float | None) -> dict:
+    from .engine import branch_and_bound
+
+    return branch_and_bound(frontier, clf, eps, max_boxes=max_boxes, time_limit=time_limit,
+                            keep_outer=keep_outer, progress=False, _tagged=True, _raw=True)
+
+
+def _subtree(blob: bytes | None, key: str, frontier: Any, eps: float, keep_outer: bool,
+             max_boxes: int, time_limit: float | None) -> Any:
+    """Worker side: the rest of a tagged search on ``frontier`` (its records level by
+    level); :data:`_MISSING` if the classifier was not sent to this process before."""
+    clf = _classifier(blob, key)
+    if clf is None:
+        return _MISSING
+    return _subtree_run(clf, frontier, eps, keep_outer, max_boxes, time_limit)
 
 
 def _two_phase(clf: Any) -> bool:
@@ -174,6 +194,49 @@ class LevelRunner:
                 self._measure((time.perf_counter() - t0) / N)
             return labels
         return self._parallel(classify, frontier, N)
+
+    def subtrees(self, classify: Any, frontier: Any, eps: float, keep_outer: bool,
+                 max_boxes: int, time_limit: float | None) -> list[dict] | None:
+        """The rest of a tagged search (see :func:`~casadi_cmpc.solvers.engine
+        .branch_and_bound`) as one task per worker, each on a contiguous range of parts:
+        the tasks' records (in the order of their ranges), or None when the work left
+        looks too small to be worth the tasks (the driver goes on). A task whose worker
+        died runs here (with a warning)."""
+        from .engine import part_ranges, task_frontier
+
+        if self.executor is None or self.cost is None \
+                or len(frontier) * self.cost < SUBTREE_MIN_S:
+            return None
+        blob, key = self._serialised(classify)
+        ranges = part_ranges(self.n_workers)
+        parts = [task_frontier(frontier, a, b) for a, b in ranges]
+        args = (eps, keep_outer, max_boxes, time_limit)
+        futures: list[Any] = []
+        for p in parts:
+            try:
+                futures.append(self.executor.submit(_subtree, blob, key, p, *args))
+            except BrokenProcessPool as exc:
+                futures.append(_Failed(exc))
+        self.n_tasks += len(futures)
+        out: list[dict] = []
+        try:
+            for p, fut in zip(parts, futures, strict=True):
+                try:
+                    r = fut.result()
+                    if isinstance(r, str) and r == _MISSING:
+                        r = self.executor.submit(_subtree, blob, key, p, *args).result()
+                except BrokenProcessPool as exc:
+                    warnings.warn(f"a worker process died ({exc}); its part of the search "
+                                  f"({len(p)} elements) runs in the driver", CmpcWarning,
+                                  stacklevel=4)
+                    self.executor = None
+                    r = _subtree_run(classify, p, *args)
+                out.append(r)
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+        return out
 
     def _measure(self, c: float) -> None:
         self.cost = c if self.cost is None else 0.5 * self.cost + 0.5 * c

@@ -34,7 +34,7 @@ from .._bisect import bisect_widest, widest
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
-from ._parallel import LevelRunner
+from ._parallel import LevelRunner, _two_phase
 
 __all__ = ["INNER", "OUTER", "UNDECIDED", "DROPPED", "Status", "BoxFrontier", "PairFrontier",
            "BnBOutcome", "branch_and_bound"]
@@ -235,7 +235,8 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                      keep_outer: bool = True, progress: bool | None = None,
                      desc: str = "branch and bound",
                      on_level: Callable[[int, Any, np.ndarray], None] | None = None,
-                     executor: Any = None) -> BnBOutcome:
+                     executor: Any = None, _tagged: bool = False, _raw: bool = False
+                     ) -> Any:
     """Breadth-first branch and bound over a frontier, one vectorised classification per level.
 
     Parameters
@@ -266,6 +267,20 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     Returns
     -------
     BnBOutcome
+
+    Notes
+    -----
+    **Parts.** At the first level after the first with at least :data:`SPLIT_N` elements
+    (the first level measures the cost per element; a frontier that
+    can ``split``, no ``on_level``, a one-phase classifier) every element is tagged with
+    one of :data:`N_PARTS` parts (its group, or its index, modulo N_PARTS); descendants
+    keep the tag, and from then on the records of each level are ordered by part (stably:
+    within a part, in the order of the search). The searches below different parts are
+    independent, so with an ``executor`` the rest of the search runs as one task per
+    worker, each on a contiguous range of parts, and their records are joined level by
+    level: the same elements in the same order as the serial search, which orders its
+    records the same way. Should the joined run exceed ``max_boxes``, the search goes on
+    serially from the split level instead (the serial result, budget included).
     """
     with warnings.catch_warnings():
         # in a notebook without ipywidgets tqdm.auto warns, then uses the text bar
@@ -288,6 +303,9 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     n_classified = 0
     runner = LevelRunner(executor)
     scope = InterruptScope()
+    tagged = bool(_tagged)
+    partition = (splits and hasattr(frontier, "data") and on_level is None
+                 and not _two_phase(classify))
     try:
         while len(frontier):
             if n_classified + len(frontier) > max_boxes:
@@ -296,6 +314,31 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             if time_limit is not None and time.perf_counter() - t0 > time_limit:
                 status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
                 break
+            if partition and not tagged and level >= 1 and len(frontier) >= SPLIT_N:
+                frontier, tagged = _tag(frontier), True
+                if runner.executor is not None:
+                    left = None if time_limit is None else \
+                        time_limit - (time.perf_counter() - t0)
+                    subs = runner.subtrees(classify, frontier, eps, keep_outer,
+                                           max_boxes - n_classified, left)
+                    joined = None if subs is None else _join_tasks(subs)
+                    if joined is not None and (joined["status"] != Status.BUDGET or
+                                               joined["message"].startswith("time_limit")) \
+                            and _within(joined["done"], n_classified, max_boxes):
+                        for k, d in enumerate(joined["done"]):
+                            history.append({"level": level + k, "classified": d[5],
+                                            "inner": 0 if d[0] is None else len(d[0]),
+                                            "outer": d[4], "boundary": sum(
+                                                len(p) for p in d[2:4] if p is not None)})
+                            if not bar.disable:
+                                bar.update(d[5])
+                        done = done + joined["done"]
+                        n_classified += sum(d[5] for d in joined["done"])
+                        level += len(joined["done"])
+                        status, message = joined["status"], joined["message"]
+                        frontier = joined["left"] if joined["left"] is not None else \
+                            frontier.take(np.zeros(len(frontier), dtype=bool))
+                        break
             labels = runner(classify, frontier)
             reduce = getattr(frontier, "reduce", None)
             small = None
@@ -318,21 +361,29 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
                 small = frontier.width() <= eps
             i_small = (undecided & small).nonzero()[0]
             i_grow = (undecided & ~small).nonzero()[0]
-            in_part = take_done(i_in) if i_in.size else None
-            out_part = take_done(i_out) if keep_outer and i_out.size else None
-            parts = [take_done(i_small)] if i_small.size else []
+            if tagged:  # the records of a level in the order of the parts
+                tag = frontier.data[_PART]
+                i_in, i_out, i_small = (i[np.argsort(tag[i], kind="stable")]
+                                        for i in (i_in, i_out, i_small))
+            in_part = _untag(take_done(i_in)) if i_in.size else None
+            out_part = _untag(take_done(i_out)) if keep_outer and i_out.size else None
+            small_part = _untag(take_done(i_small)) if i_small.size else None
+            stuck_part = None
             grow = frontier.take(i_grow)
             if not len(grow):
                 nxt = grow
             elif splits:
                 nxt, stuck = grow.split()
-                if len(stuck):
-                    parts.append(stuck)  # too narrow for floating point: undecided for good
+                if len(stuck):  # too narrow for floating point: undecided for good
+                    if tagged:
+                        stuck = stuck.take(np.argsort(stuck.data[_PART], kind="stable"))
+                    stuck_part = _untag(stuck)
             else:
                 nxt = grow.bisect()
-            n_bnd = sum(len(p) for p in parts)
+            n_bnd = sum(len(p) for p in (small_part, stuck_part) if p is not None)
             # commit the level in one assignment statement
-            done, frontier, n_classified = done + [(in_part, out_part, parts, i_out.size, n)], \
+            done, frontier, n_classified = done + [
+                (in_part, out_part, small_part, stuck_part, i_out.size, n)], \
                 nxt, n_classified + n
             history.append({"level": level, "classified": n, "inner": int(i_in.size),
                             "outer": int(i_out.size), "boundary": n_bnd})
@@ -346,14 +397,18 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     finally:
         scope.close()
         bar.close()
+    if _raw:  # a task of a split search: the records level by level
+        return {"done": done, "status": status, "message": message,
+                "left": frontier if len(frontier) else None}
     level = len(done)
     inner = [d[0] for d in done if d[0] is not None]
     outer = [d[1] for d in done if d[1] is not None]
-    boundary = [p for d in done for p in d[2]]
-    n_discarded = int(sum(d[3] for d in done))
-    n_classified = int(sum(d[4] for d in done))
+    boundary = [p for d in done for p in d[2:4] if p is not None]
+    n_discarded = int(sum(d[4] for d in done))
+    n_classified = int(sum(d[5] for d in done))
     history = history[:level]
     if len(frontier):
+        frontier = _untag(frontier)
         boundary.append(frontier)  # unclassified leftovers are undecided: sound
     empty = frontier.take(np.zeros(len(frontier), dtype=bool))
     cat = type(frontier).concat
@@ -363,6 +418,80 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
         outer=cat(outer) if outer else empty,
         n_discarded=n_discarded, status=status, message=message, levels=level,
         n_classified=n_classified, elapsed=time.perf_counter() - t0, history=history)
+
+
+#: elements of the level at which a search is cut into parts (see branch_and_bound)
+SPLIT_N = 256
+#: number of parts
+N_PARTS = 64
+_PART = "_part"  # the data key of an element's part
+
+
+def _tag(frontier: Any) -> Any:
+    """The frontier with its part tags: the group (or the index) modulo N_PARTS."""
+    g = getattr(frontier, "group", None)
+    ids = g if g is not None else np.arange(len(frontier))
+    data = dict(frontier.data) if frontier.data is not None else {}
+    data[_PART] = (ids % N_PARTS).astype(np.int16)
+    fr = frontier.take(np.arange(len(frontier)))
+    fr.data = data
+    return fr
+
+
+def _untag(part: Any) -> Any:
+    """The part without its tags (records carry only the classifier's data)."""
+    if part is not None and getattr(part, "data", None) is not None and _PART in part.data:
+        data = {k: v for k, v in part.data.items() if k != _PART}
+        part.data = data or None
+    return part
+
+
+def part_ranges(n_tasks: int) -> list[tuple[int, int]]:
+    """The contiguous part ranges ``[a, b)`` of ``n_tasks`` tasks (balanced)."""
+    k = max(1, min(int(n_tasks), N_PARTS))
+    return [(i * N_PARTS // k, (i + 1) * N_PARTS // k) for i in range(k)]
+
+
+def task_frontier(frontier: Any, a: int, b: int) -> Any:
+    """The elements of parts ``a <= part < b`` (in their order), group ids made dense."""
+    tag = frontier.data[_PART]
+    sub = frontier.take(np.flatnonzero((tag >= a) & (tag < b)))
+    if getattr(sub, "group", None) is not None and len(sub):
+        sub.group = np.unique(sub.group, return_inverse=True)[1].astype(np.intp)
+    return sub
+
+
+def _join_tasks(results: list[dict]) -> dict:
+    """The records of tasks on consecutive part ranges, joined level by level."""
+    depth = max(len(r["done"]) for r in results)
+    done = []
+
+    def cat(items: list[Any]) -> Any:
+        items = [p for p in items if p is not None]
+        if not items:
+            return None
+        return items[0] if len(items) == 1 else type(items[0]).concat(items)
+
+    for k in range(depth):
+        rows = [r["done"][k] for r in results if k < len(r["done"])]
+        done.append(tuple(cat([d[j] for d in rows]) for j in range(4))
+                    + (sum(d[4] for d in rows), sum(d[5] for d in rows)))
+    budget = [r for r in results if r["status"] == Status.BUDGET]
+    left = cat([_untag(r["left"]) for r in results if r["left"] is not None])
+    status, message = ((Status.BUDGET, budget[0]["message"]) if budget
+                       else (Status.PROVED, "search completed"))
+    return {"done": done, "status": status, "message": message, "left": left}
+
+
+def _within(done: list[tuple], n0: int, max_boxes: int) -> bool:
+    """Whether the serial search would have classified every level of ``done`` within
+    ``max_boxes`` (it stops before a level whose elements would exceed it)."""
+    n = n0
+    for d in done:
+        if n + d[5] > max_boxes:
+            return False
+        n += d[5]
+    return True
 
 
 def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
