@@ -198,10 +198,11 @@ class LevelRunner:
     def subtrees(self, classify: Any, frontier: Any, eps: float, keep_outer: bool,
                  max_boxes: int, time_limit: float | None) -> list[dict] | None:
         """The rest of a tagged search (see :func:`~casadi_cmpc.solvers.engine
-        .branch_and_bound`) as one task per worker, each on a contiguous range of parts:
-        the tasks' records (in the order of their ranges), or None when the work left
-        looks too small to be worth the tasks (the driver goes on). A task whose worker
-        died runs here (with a warning)."""
+        .branch_and_bound`) cut into one contiguous range of parts per worker: the first
+        range runs here while the others run as tasks (the driver would otherwise only
+        wait, and its compiled functions are warm). Returns the records of the ranges in
+        their order, or None when the work left looks too small to be worth the tasks
+        (the driver goes on alone). A task whose worker died runs here (with a warning)."""
         from .engine import part_ranges, task_frontier
 
         if self.executor is None or self.cost is None \
@@ -211,16 +212,22 @@ class LevelRunner:
         ranges = part_ranges(self.n_workers)
         parts = [task_frontier(frontier, a, b) for a, b in ranges]
         args = (eps, keep_outer, max_boxes, time_limit)
-        futures: list[Any] = []
-        for p in parts:
+        futures: list[Any] = [None]  # the first part runs here meanwhile
+        for p in parts[1:]:
+            if not len(p):
+                futures.append(None)
+                continue
             try:
                 futures.append(self.executor.submit(_subtree, blob, key, p, *args))
             except BrokenProcessPool as exc:
                 futures.append(_Failed(exc))
-        self.n_tasks += len(futures)
+        self.n_tasks += sum(f is not None for f in futures)
         out: list[dict] = []
         try:
             for p, fut in zip(parts, futures, strict=True):
+                if fut is None:
+                    out.append(_subtree_run(classify, p, *args))
+                    continue
                 try:
                     r = fut.result()
                     if isinstance(r, str) and r == _MISSING:
@@ -234,7 +241,8 @@ class LevelRunner:
                 out.append(r)
         except BaseException:
             for fut in futures:
-                fut.cancel()
+                if fut is not None:
+                    fut.cancel()
             raise
         return out
 

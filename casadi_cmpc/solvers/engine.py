@@ -273,7 +273,8 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     **Parts.** At the first level after the first with at least :data:`SPLIT_N` elements
     (the first level measures the cost per element; a frontier that
     can ``split``, no ``on_level``, a one-phase classifier) every element is tagged with
-    one of :data:`N_PARTS` parts (its group, or its index, modulo N_PARTS); descendants
+    one of :data:`N_PARTS` parts (its group, or its index, modulo N_PARTS, bits reversed:
+    neighbours go to different ranges of parts); descendants
     keep the tag, and from then on the records of each level are ordered by part (stably:
     within a part, in the order of the search). The searches below different parts are
     independent, so with an ``executor`` the rest of the search runs as one task per
@@ -427,12 +428,19 @@ N_PARTS = 64
 _PART = "_part"  # the data key of an element's part
 
 
+# part of the index k (mod N_PARTS): its 6 bits reversed, so that consecutive elements
+# fall in different contiguous ranges of parts (each range a balanced, interleaved share)
+_BITS = N_PARTS.bit_length() - 1  # N_PARTS is a power of two
+_SPREAD = np.array([int(f"{k:0{_BITS}b}"[::-1], 2) for k in range(N_PARTS)], dtype=np.int16)
+
+
 def _tag(frontier: Any) -> Any:
-    """The frontier with its part tags: the group (or the index) modulo N_PARTS."""
+    """The frontier with its part tags: the group (or the index) modulo N_PARTS, spread by
+    bit reversal."""
     g = getattr(frontier, "group", None)
     ids = g if g is not None else np.arange(len(frontier))
     data = dict(frontier.data) if frontier.data is not None else {}
-    data[_PART] = (ids % N_PARTS).astype(np.int16)
+    data[_PART] = _SPREAD[ids % N_PARTS]
     fr = frontier.take(np.arange(len(frontier)))
     fr.data = data
     return fr
