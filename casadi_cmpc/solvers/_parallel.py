@@ -14,6 +14,13 @@ do for the operations every backend evaluates alike (``+ - *``, squares, constan
 libm functions the numpy, scalar and native backends may differ in the last bits of a bound,
 which can change a label at a box within a few ulps of a decision.
 
+A set search (a frontier that splits, a one-phase classifier, no per-level callback) is
+also cut into *parts* at its split level (see :func:`~casadi_cmpc.solvers.engine
+.branch_and_bound`): :meth:`LevelRunner.subtrees` runs the rest of the search below each
+contiguous range of parts as one task, the first range in the driver, and the engine joins
+their records level by level. This spreads the whole search below the split (bisection and
+bookkeeping included), not only the classification of large levels.
+
 Chunk sizes follow the measured cost: about :data:`TARGET_S` seconds of work per task (a Dask
 task costs about 1 ms of overhead, a process-pool task less), from the cost per element of
 the previous levels; a search's first levels, and every level with less work than two tasks,
