@@ -558,6 +558,13 @@ def union_volume(details: dict[str, Any]) -> float:
     n_l = D_lin.dim
     I = np.eye(n_l)
     total = 0.0
+    if n_l == 2:  # slabs between the crossings of the rows' lines (fast, same measure)
+        for b in np.unique(box_index):
+            ks = np.flatnonzero(box_index == b)
+            rows = [details["rows"][details["member"][k]] for k in ks]
+            vb = float(np.prod(boxes[b, :, 1] - boxes[b, :, 0])) if boxes.shape[1] else 1.0
+            total += vb * _union_area_2d(rows, [details["offsets"][k] for k in ks], D_lin)
+        return total
     for b in np.unique(box_index):
         sel = []
         for k in np.flatnonzero(box_index == b):
@@ -567,6 +574,65 @@ def union_volume(details: dict[str, Any]) -> float:
         vb = float(np.prod(boxes[b, :, 1] - boxes[b, :, 0])) if boxes.shape[1] else 1.0
         total += vb * _union_of(sel)
     return total
+
+
+def _union_area_2d(rows: list[np.ndarray], offsets: list[np.ndarray], D: Box) -> float:
+    """Area of the union of the polygons ``{y in D : M_k y <= c_k}`` (D a 2-D box, M_k
+    (t_k, 2), c_k (t_k,)), by vertical slabs: between consecutive x where two of the
+    polygons' lines cross (or a vertical line stands), each polygon's section is an
+    interval whose ends move linearly, and so does the length of their union; the area
+    is the sum over the slabs of width times that length at the slab's middle. In floating
+    point (a measure, not a claim: the pieces themselves are proven)."""
+    K = len(rows)
+    if K == 0:
+        return 0.0
+    t = max(r.shape[0] for r in rows)
+    M = np.zeros((K, t, 2))
+    C = np.full((K, t), np.inf)  # padding rows: 0 . y <= inf
+    for k, (r, c) in enumerate(zip(rows, offsets, strict=True)):
+        M[k, : r.shape[0]] = r
+        C[k, : r.shape[0]] = c
+    (x0, y0), (x1, y1) = D.lo, D.hi
+    if not (x1 > x0 and y1 > y0):
+        return 0.0
+    # every line a . y = b of the polygons and of D
+    A = np.concatenate([M.reshape(-1, 2), [[0.0, 1.0], [0.0, 1.0]]])
+    B = np.concatenate([C.reshape(-1), [y0, y1]])
+    keep = np.isfinite(B) & (np.abs(A).sum(axis=1) > 0)
+    A, B = A[keep], B[keep]
+    ev = [np.array([x0, x1])]
+    vert = (A[:, 1] == 0) & (A[:, 0] != 0)
+    ev.append(B[vert] / A[vert, 0])
+    i, j = np.triu_indices(A.shape[0], 1)
+    det = A[i, 0] * A[j, 1] - A[i, 1] * A[j, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = (B[i] * A[j, 1] - B[j] * A[i, 1]) / det
+    ev.append(xc[(det != 0) & np.isfinite(xc)])
+    xs = np.concatenate(ev)
+    xs = np.unique(xs[(xs >= x0) & (xs <= x1)])
+    if xs.size < 2:
+        return 0.0
+    width = np.diff(xs)
+    mid = 0.5 * (xs[1:] + xs[:-1])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        rhs = C[None] - M[None, :, :, 0] * mid[:, None, None]  # (S, K, t): My y <= rhs
+        My = M[None, :, :, 1]
+        up = np.where(My > 0, rhs / np.where(My > 0, My, 1.0), np.inf).min(axis=2)
+        lo = np.where(My < 0, rhs / np.where(My < 0, My, 1.0), -np.inf).max(axis=2)
+    ok = np.where(My == 0, rhs >= 0, True).all(axis=2)
+    up, lo = np.minimum(up, y1), np.maximum(lo, y0)
+    ok &= up > lo
+    lo = np.where(ok, lo, np.inf)
+    up = np.where(ok, up, -np.inf)
+    order = np.argsort(lo, axis=1)
+    lo = np.take_along_axis(lo, order, axis=1)
+    up = np.take_along_axis(up, order, axis=1)
+    prev = np.concatenate([np.full((lo.shape[0], 1), -np.inf),
+                           np.maximum.accumulate(up, axis=1)[:, :-1]], axis=1)
+    with np.errstate(invalid="ignore"):
+        add = np.maximum(0.0, up - np.maximum(lo, prev))
+    length = np.where(np.isfinite(add), add, 0.0).sum(axis=1)
+    return float((width * length).sum())
 
 
 def _union_of(polys: list[Polytope]) -> float:

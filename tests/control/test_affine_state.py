@@ -214,3 +214,27 @@ def test_affine_sequence_refuses_general_only_options(e11):
     with pytest.raises(ValueError, match="unknown method"):
         cm.controllable_sets(e11.model, e11.terminal, 0.1, method="boxes",
                              law=e11.local_law)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 5), st.booleans())
+def test_union_area_of_two_linear_states_equals_the_exact_decomposition(seed, t, K, shared):
+    """The slab sweep of union_volume (two linear states) against the disjoint
+    decomposition by polytope differences, on random polygons in a box (axis-parallel
+    rows included)."""
+    from casadi_cmpc.control.affine_state import _union_area_2d, _union_of
+
+    rng = np.random.default_rng(seed)
+    D = cm.Box([-1.0, -0.5], [1.0, 2.0])
+    I = np.eye(2)
+    Ms = [rng.normal(size=(t, 2))] * K if shared else [rng.normal(size=(t, 2))
+                                                        for _ in range(K)]
+    if seed % 3 == 0:
+        Ms = [np.vstack([[0.0, 1.0], M[1:]]) for M in Ms]  # a horizontal edge
+    if seed % 4 == 0:
+        Ms = [np.vstack([[1.0, 0.0], M[1:]]) for M in Ms]  # a vertical edge
+    cs = [0.8 * rng.normal(size=t) for _ in range(K)]
+    polys = [cm.Polytope(np.vstack([M, I, -I]), np.concatenate([c, D.hi, -D.lo]))
+             for M, c in zip(Ms, cs, strict=True)]
+    exact = _union_of(polys)
+    assert _union_area_2d(Ms, cs, D) == pytest.approx(exact, rel=1e-9, abs=1e-12)
