@@ -353,12 +353,47 @@ class OneStepSet(SetResult):
         """Whether points lie in an inner box (proven members of the set), or in a piece
         for the affine-state method."""
         if self.pieces is not None:
-            if not len(self.pieces):
-                P = np.atleast_2d(np.asarray(points, dtype=float))
-                out = np.zeros(P.shape[0], dtype=bool)
-                return out if np.ndim(points) > 1 else bool(out[0])
-            return self.pieces.contains(points)
+            P = np.atleast_2d(np.asarray(points, dtype=float))
+            out = self._first_piece(P) >= 0
+            return out if np.ndim(points) > 1 else bool(out[0])
         return self.paving.contains(points, view="inner")
+
+    def _first_piece(self, P: np.ndarray) -> np.ndarray:
+        """Per point of P (N, n), the index of the first piece holding it (-1: none), by
+        the exact membership test of the pieces. With the affine-state details, only the
+        pieces of the x_NL cells that hold a point are asked (a piece lies in its cell,
+        so the answer is the same)."""
+        N = P.shape[0]
+        first = np.full(N, -1, dtype=np.intp)
+        if not len(self.pieces):
+            return first
+        polys = self.pieces.polytopes
+        d = self.details or {}
+        if not {"boxes", "box", "nl"} <= set(d) or len(d["box"]) != len(polys):
+            for k, Q in enumerate(polys):
+                free = np.flatnonzero(first < 0)
+                if not free.size:
+                    break
+                hit = np.asarray(Q.contains(P[free]), dtype=bool)
+                first[free[hit]] = k
+            return first
+        boxes, bix, nl = d["boxes"], np.asarray(d["box"]), list(d["nl"])
+        Pn = P[:, nl]
+        order = np.argsort(bix, kind="stable")  # pieces of a cell, in their order
+        cells, starts = np.unique(bix[order], return_index=True)
+        ends = np.append(starts[1:], order.size)
+        for c, a, b in zip(cells, starts, ends, strict=True):
+            B = boxes[c]
+            sel = np.flatnonzero(((Pn >= B[:, 0]) & (Pn <= B[:, 1])).all(axis=1))
+            for k in order[a:b]:
+                # a point on a face of two cells may already hold an earlier piece
+                sel = sel[(first[sel] < 0) | (first[sel] > k)]
+                if not sel.size:
+                    break
+                hit = np.asarray(polys[k].contains(P[sel]), dtype=bool)
+                first[sel[hit]] = k
+                sel = sel[~hit]
+        return first
 
     def control(self, x: Any) -> np.ndarray | None:
         """The stored proving control of the first inner box (or piece) containing ``x``
@@ -367,10 +402,8 @@ class OneStepSet(SetResult):
             return None
         x = np.asarray(x, dtype=float).reshape(-1)
         if self.pieces is not None:
-            for k, P in enumerate(self.pieces):
-                if P.contains(x):
-                    return self.witness[k].copy()
-            return None
+            k = int(self._first_piece(x[None])[0])
+            return None if k < 0 else self.witness[k].copy()
         I = self.paving.inner
         hit = np.flatnonzero(((I[..., 0] <= x) & (x <= I[..., 1])).all(axis=1))
         return None if hit.size == 0 else self.witness[hit[0]].copy()

@@ -238,3 +238,24 @@ def test_union_area_of_two_linear_states_equals_the_exact_decomposition(seed, t,
              for M, c in zip(Ms, cs, strict=True)]
     exact = _union_of(polys)
     assert _union_area_2d(Ms, cs, D) == pytest.approx(exact, rel=1e-9, abs=1e-12)
+
+
+def test_membership_by_cells_equals_the_test_of_every_piece(e11):
+    """contains() and control() ask only the pieces of the x_NL cells holding a point; the
+    answers (and the first piece, whose control is returned) are those of asking every
+    piece in order, also for points on the faces shared by two cells."""
+    m, T = e11.model, e11.terminal
+    res = cm.one_step_set(m, T, 0.1, robust=True, progress=False)
+    rng = np.random.default_rng(4)
+    X = m.X.lo + rng.random((3000, 2)) * (m.X.hi - m.X.lo)
+    nl = list(res.details["nl"])
+    edges = np.unique(res.details["boxes"][:, 0, :])  # one nonlinear state
+    X[:600, nl[0]] = rng.choice(edges, 600)  # on the faces between cells
+    first = res._first_piece(X)
+    ref = np.full(X.shape[0], -1)
+    for k, P in enumerate(res.pieces.polytopes):
+        ref[(ref < 0) & P.contains(X)] = k
+    assert np.array_equal(first, ref) and (ref[:600] >= 0).sum() > 20
+    assert np.array_equal(res.contains(X), ref >= 0)
+    i = int(np.flatnonzero(ref[:600] >= 0)[0])
+    assert np.array_equal(res.control(X[i]), res.witness[ref[i]])
