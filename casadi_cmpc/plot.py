@@ -280,17 +280,25 @@ def _x0_text(x0: np.ndarray) -> str:
     return "x0 = (" + ", ".join(f"{v:.4g}" for v in np.asarray(x0, dtype=float)) + ")"
 
 
+def draw_state_box(ax: Any, model: Any, i: int, j: int, label: str = "X") -> None:
+    """The model's state box X projected on the axes (i, j): a dashed black rectangle,
+    included in the data limits of ``ax``."""
+    from matplotlib.patches import Rectangle
+
+    X = model.X
+    ax.add_patch(Rectangle((X.lo[i], X.lo[j]), X.hi[i] - X.lo[i], X.hi[j] - X.lo[j],
+                           fill=False, edgecolor="k", linestyle="--", linewidth=1.0,
+                           label=label))
+    ax.update_datalim([[X.lo[i], X.lo[j]], [X.hi[i], X.hi[j]]])
+
+
 def _draw_constraints_and_sets(pa: Any, model: Any, i: int, j: int, sets: Any,
                                obstacles: Any, obstacle_label: str) -> None:
     """X (dashed rectangle), the given sets and the obstacle discs in the phase plane."""
-    from matplotlib.patches import Circle, Rectangle
+    from matplotlib.patches import Circle
 
     if model is not None:
-        X = model.X
-        pa.add_patch(Rectangle((X.lo[i], X.lo[j]), X.hi[i] - X.lo[i], X.hi[j] - X.lo[j],
-                               fill=False, edgecolor="k", linestyle="--", linewidth=1.0,
-                               label="X"))
-        pa.update_datalim([[X.lo[i], X.lo[j]], [X.hi[i], X.hi[j]]])
+        draw_state_box(pa, model, i, j)
     for c, (label, S) in enumerate(_named_sets(sets)):
         col = f"C{(c + 1) % 10}"
         S.plot(ax=pa, dims=(i, j), facecolor=col, alpha=0.3, edgecolor=col, label=label)

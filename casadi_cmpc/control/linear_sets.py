@@ -559,9 +559,16 @@ class SetSequence:
         """
         import matplotlib as mpl
         import matplotlib.pyplot as plt
-        from matplotlib.patches import Patch, Rectangle
+        from matplotlib.patches import Patch
 
-        from ..plot import axis_label, legend_outside, new_axes, plot_boxes, variable_labels
+        from ..plot import (
+            axis_label,
+            draw_state_box,
+            legend_outside,
+            new_axes,
+            plot_boxes,
+            variable_labels,
+        )
 
         ax = new_axes(ax)
         i_d, j_d = int(dims[0]), int(dims[1])
@@ -592,11 +599,7 @@ class SetSequence:
                            linewidth=1.8, label="T = K_0 (terminal set)" if first else None)
                     first = False
         if model is not None:
-            X = model.X
-            ax.add_patch(Rectangle((X.lo[i_d], X.lo[j_d]), X.hi[i_d] - X.lo[i_d],
-                                   X.hi[j_d] - X.lo[j_d], fill=False, edgecolor="k",
-                                   linestyle="--", linewidth=1.0, label="X (state box)"))
-            ax.update_datalim([[X.lo[i_d], X.lo[j_d]], [X.hi[i_d], X.hi[j_d]]])
+            draw_state_box(ax, model, i_d, j_d, label="X (state box)")
             ax.autoscale_view()
         if colorbar:
             sm = mpl.cm.ScalarMappable(norm=norm, cmap=cm_)

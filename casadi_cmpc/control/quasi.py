@@ -606,9 +606,16 @@ class QuasiSequence:
         """
         import matplotlib as mpl
         import matplotlib.pyplot as plt
-        from matplotlib.patches import Patch, Rectangle
+        from matplotlib.patches import Patch
 
-        from ..plot import axis_label, legend_outside, new_axes, plot_boxes, variable_labels
+        from ..plot import (
+            axis_label,
+            draw_state_box,
+            legend_outside,
+            new_axes,
+            plot_boxes,
+            variable_labels,
+        )
 
         ax = new_axes(ax)
         i_d, j_d = int(dims[0]), int(dims[1])
@@ -627,11 +634,7 @@ class QuasiSequence:
                                edgecolor="magenta", linewidth=1.8,
                                label="T = P_0 (terminal set)")
         if model is not None:
-            X = model.X
-            ax.add_patch(Rectangle((X.lo[i_d], X.lo[j_d]), X.hi[i_d] - X.lo[i_d],
-                                   X.hi[j_d] - X.lo[j_d], fill=False, edgecolor="k",
-                                   linestyle="--", linewidth=1.0, label="X (state box)"))
-            ax.update_datalim([[X.lo[i_d], X.lo[j_d]], [X.hi[i_d], X.hi[j_d]]])
+            draw_state_box(ax, model, i_d, j_d, label="X (state box)")
             ax.autoscale_view()
             names, units = variable_labels(model, "x")
         else:
