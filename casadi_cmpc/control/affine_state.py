@@ -142,18 +142,8 @@ def _undominated(C: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 def _polytope(A: np.ndarray, b: np.ndarray) -> Polytope:
     """A Polytope of rows built here (finite, shapes checked by construction), without the
-    validation of the public constructor; A is shared read-only by the pieces."""
-    P = object.__new__(Polytope)
-    if A.flags.writeable:
-        A.setflags(write=False)
-    b = np.array(b, dtype=float)
-    b.setflags(write=False)
-    P.A, P.b, P._cache = A, b, {}
-    return P
-
-
-def _polytope_row(A: np.ndarray, b: np.ndarray) -> Polytope:
-    """:func:`_polytope` for a read-only A and a read-only row b (used as it is)."""
+    validation of the public constructor; A and b are read-only and used as they are (A
+    is shared by the pieces, b is a row of a read-only array)."""
     P = object.__new__(Polytope)
     P.A, P.b, P._cache = A, b, {}
     return P
@@ -373,7 +363,7 @@ def affine_state_pieces(model: Model, members: list[Polytope], D: Box, eps: floa
             off.setflags(write=False)
             if Afull.flags.writeable:
                 Afull.setflags(write=False)
-            pieces.extend(_polytope_row(Afull, b) for b in bvec)
+            pieces.extend(_polytope(Afull, b) for b in bvec)
             offs.extend(off)
             wit.append(ctrl[ck])
             mem.extend([j] * K)
