@@ -10,10 +10,13 @@ Prints one JSON line:
   set searches), µs per call, native against numpy.
 * ``call_n1``: one natural call at N = 1 on the 2-state cannon model (E8), µs, with the
   default backend (the scalar evaluator at this size) and with the native one.
-* ``one_step_3state``: ``one_step_set`` on a 3-state model at eps 0.05 against the naive grid
-  (one cell per eps-box, one transition per cell and control value on 17 values, the same
-  centered inclusion, cells certified once skipped): pairs per second and certified volume
-  of each. The grid is the benchmark's reference, not a library feature.
+* ``one_step_3state``: ``one_step_set`` (the state × control branch and bound,
+  ``method="general"``) on a 3-state model at eps 0.05 against the naive grid (one cell per
+  eps-box, one transition per cell and control value on 17 values, the same centered
+  inclusion, cells certified once skipped): pairs per second and certified volume of each;
+  beside them the default method for this model (affine-state: x_1 and x_2 enter f
+  linearly), its seconds and volume. The grid is the benchmark's reference, not a library
+  feature.
 * ``e9_sequence``: the E9 robust controllable sequence at eps 0.05, seconds with numpy forced
   against the default backend (native once a function is called repeatedly), and whether
   the sets are identical.
@@ -171,9 +174,15 @@ def one_step_3state() -> dict:
     m = cm.Model(x=x, u=u, f=f, X=cm.Box([-1] * 3, [1] * 3), U=cm.Box([-2], [2]))
     T = cm.Polytope.from_box(cm.Box([-0.4] * 3, [0.4] * 3))
     eps = 0.05
+    # the state x control branch and bound (the default picks the affine-state method for
+    # this model: x_1 and x_2 enter f linearly; it is reported beside)
+    cm.one_step_set(m, T, eps, method="general", progress=False)  # kernels compiled
     t0 = time.perf_counter()
-    K = cm.one_step_set(m, T, eps, progress=False)
+    K = cm.one_step_set(m, T, eps, method="general", progress=False)
     t_ours = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    Ka = cm.one_step_set(m, T, eps, progress=False)
+    t_aff = time.perf_counter() - t0
     k = int(round(2 / eps))
     edges = np.linspace(-1, 1, k + 1)
     lo = np.stack(np.meshgrid(edges[:-1], edges[:-1], edges[:-1], indexing="ij"),
@@ -190,9 +199,13 @@ def one_step_3state() -> dict:
         ok[todo] |= ((Y[:, :, 0] >= -0.4) & (Y[:, :, 1] <= 0.4)).all(axis=1)
     t_grid = time.perf_counter() - t0
     return {"ours_s": t_ours, "ours_pairs_per_s": K.n_pairs / t_ours,
-            "ours_volume": float(K.paving.volume()), "grid_s": t_grid,
+            "ours_volume": float(K.area()), "affine_state_s": t_aff, "affine_state_volume": float(Ka.area()),
+            "affine_state_method": Ka.pieces is not None, "grid_s": t_grid,
             "grid_pairs_per_s": pairs / t_grid, "grid_volume": float(ok.sum() * (2 / k) ** 3),
-            "pairs_per_s_ours_over_grid": (K.n_pairs / t_ours) / (pairs / t_grid)}
+            "pairs_per_s_ours_over_grid": (K.n_pairs / t_ours) / (pairs / t_grid),
+            "ours_volume_over_grid": float(K.area()) / max(float(ok.sum() * (2 / k) ** 3),
+                                                         1e-300),
+            "time_to_volume_grid_over_ours": t_grid / t_ours}
 
 
 def e9_sequence() -> dict:
@@ -228,7 +241,16 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false "
                       "intra_op_parallelism_threads=1")
 sys.path.insert(0, sys.argv[1])
+import importlib.util
 import casadi_cmpc as cm
+# the example models of the baseline tree (an editable install maps casadi_cmpc.models to
+# the current tree's models/ otherwise)
+_root = os.path.join(os.path.dirname(cm.__file__), os.pardir, "models")
+_spec = importlib.util.spec_from_file_location(
+    "casadi_cmpc.models", os.path.join(_root, "__init__.py"),
+    submodule_search_locations=[_root])
+cm.models = sys.modules["casadi_cmpc.models"] = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(cm.models)
 from casadi_cmpc.interval import InclusionFunction
 from _timing import median_time
 m = cm.models.load("cstr").model

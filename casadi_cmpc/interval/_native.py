@@ -48,7 +48,7 @@ _FLAGS = ("-O3", "-fno-fast-math", "-fno-trapping-math", "-ffp-contract=off", "-
 _ARCH = "-march=native"  # the SIMD width of this machine; dropped where the compiler refuses
 _lock = threading.Lock()
 _state: dict[str, Any] = {"cc": None, "checked": False, "warned": False}
-_loaded: dict[str, Any] = {}  # source hash -> the loaded kernel function
+_loaded: dict[tuple[str, str], Any] = {}  # (source hash, symbol) -> loaded C function
 
 
 def kernel_dir() -> Path:
@@ -467,21 +467,19 @@ def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray]
                        wait=wait)
 
 
-def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
-                wait: bool = True
-                ) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
-    """``run(boxes, n)`` of a kernel source ``cmpc_batch`` (inputs ``(N_i, d_i, 2)``,
-    outputs ``(n, d_o, 2)``), loaded from the disk cache or compiled; None on failure.
+def load_symbol(src: str, name: str, argtypes: Sequence[Any], wait: bool = True) -> Any:
+    """The C function ``name`` (returning void, arguments ``argtypes`` of ctypes) of the
+    source ``src``, loaded from the disk cache or compiled (the flags of every kernel);
+    None without a compiler, with ``CMPC_NATIVE=0`` or when it does not compile.
 
-    ``wait=False``: a kernel that is not in the disk cache is compiled in a background
-    thread (a large function takes seconds to tens of seconds) and :data:`PENDING` is
-    returned until it is there; the caller evaluates with numpy meanwhile."""
+    ``wait=False``: a source that is not in the disk cache is compiled in a background
+    thread and :data:`PENDING` (falsy) is returned until it is there."""
     if not native_available():
         return None
     key = hashlib.sha256("\0".join([src, str(_compiler()), " ".join(_FLAGS), _ARCH,
                                      _cpu_id()]).encode()).hexdigest()[:24]
     with _lock:
-        fn = _loaded.get(key)
+        fn = _loaded.get((key, name))
         failed = key in _failed
         building = _building.get(key)
     if fn is None:
@@ -497,11 +495,28 @@ def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
             lib = _build(src, key)
         if lib is None:
             return None
-        fn = ctypes.CDLL(str(lib)).cmpc_batch
+        fn = getattr(ctypes.CDLL(str(lib)), name)
         fn.restype = None
-        fn.argtypes = [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        fn.argtypes = list(argtypes)
         with _lock:
-            _loaded[key] = fn
+            _loaded[(key, name)] = fn
+    return fn
+
+
+def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
+                wait: bool = True
+                ) -> Callable[[Sequence[np.ndarray], int], list[np.ndarray]] | None:
+    """``run(boxes, n)`` of a kernel source ``cmpc_batch`` (inputs ``(N_i, d_i, 2)``,
+    outputs ``(n, d_o, 2)``), loaded from the disk cache or compiled; None on failure.
+
+    ``wait=False``: a kernel that is not in the disk cache is compiled in a background
+    thread (a large function takes seconds to tens of seconds) and :data:`PENDING` is
+    returned until it is there; the caller evaluates with numpy meanwhile."""
+    fn = load_symbol(src, "cmpc_batch",
+                     [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p],
+                     wait=wait)
+    if not fn:
+        return fn
     n_in = len(size_in)
     sizes = list(size_out)
     widths = [2 * int(d) for d in size_in]

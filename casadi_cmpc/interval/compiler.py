@@ -512,7 +512,10 @@ class InclusionFunction:
     evaluated :attr:`native_after` batches (its compilation starts in the background after
     :attr:`native_prefetch` batches, and the switch waits for it: the batch at which the
     backend changes does not depend on timings); ``"numpy"``, ``"scalar"`` and ``"native"``
-    force one (an empty batch always goes to numpy). The centered form's scalar evaluation runs
+    force one (an empty batch always goes to numpy). Once a function is on its native kernel,
+    a small batch goes there too when it holds at least :attr:`native_small_work` box
+    instructions (boxes × instructions: the scalar code would then take longer than the
+    kernel's call). The centered form's scalar evaluation runs
     its Jacobian graph on floats and combines the mean-value terms in Python exactly as
     :meth:`_centered_impl` does (its jump guard encloses the guard expressions with scalar code
     too). A Function with an operation the scalar evaluator lacks is evaluated with numpy
@@ -526,7 +529,7 @@ class InclusionFunction:
     scalar_max_batch_centered: int = 16
     native_after: int = 16
     native_prefetch: int = 4
-    native_large: int = 200
+    native_small_work: int = 64
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
                  backend: str = "auto", derived_outputs: Sequence[int] = (),
@@ -591,9 +594,8 @@ class InclusionFunction:
         self._is_natural = self._natural_form()
         self._native: Any = None  # the native kernel; False: not available
         self._native_batches = 0  # batches evaluated so far by numpy (auto: when to compile)
-        n_instr = self.fun.n_instructions() + (
+        self._n_instr = self.fun.n_instructions() + (
             self._g.n_instructions() if not self._is_natural else 0)
-        self._large = n_instr >= self.native_large  # small batches gain from native too
 
     def __reduce__(self) -> tuple[Any, tuple[bytes]]:
         """Pickled as its CasADi graph and options; rebuilt once per process (the compiled
@@ -1161,9 +1163,10 @@ class InclusionFunction:
         backend is chosen as for a call (see the class Notes).
         """
         small = 0 < n <= self._scalar_limit()
-        # a small batch goes to the native kernel only for a large function (its call costs
-        # a few µs; the scalar evaluator about 0.1 µs per box and instruction)
-        if n and (self._large or not small) and self._wants_native(n):
+        # a small batch goes to the native kernel once its work is worth the call (about
+        # 8 µs; the scalar evaluator costs about 0.1 µs per box and instruction)
+        if n and (not small or n * self._n_instr >= self.native_small_work) \
+                and self._wants_native(n):
             if not self._is_natural:
                 return self._numpy(boxes, n)  # the centered form takes its native kernel
             run = self._native_kernel()

@@ -197,6 +197,134 @@ def _covered(Q: np.ndarray, U: np.ndarray) -> np.ndarray:
     return res
 
 
+# The grid tests of :class:`_BoxGrid` as one C loop over the queries (binary searches in the
+# edges and the 2**n look-ups of the count table of each query in registers): the same
+# exact comparisons as the numpy code below, which evaluates where no C compiler is found.
+_GRID_C = r"""
+#include <math.h>
+#include <stdint.h>
+
+static int64_t lower_bound(const double *e, int64_t m, double x)
+{   /* first i with e[i] >= x */
+    int64_t lo = 0, hi = m;
+    while (lo < hi) { int64_t mid = lo + (hi - lo) / 2; if (e[mid] < x) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
+static int64_t upper_bound(const double *e, int64_t m, double x)
+{   /* first i with e[i] > x */
+    int64_t lo = 0, hi = m;
+    while (lo < hi) { int64_t mid = lo + (hi - lo) / 2; if (e[mid] <= x) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
+void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
+                     const int64_t *off, const int64_t *table, const int64_t *stride,
+                     int64_t contains, int8_t *out)
+{
+    int64_t a[32], b[32];
+    for (int64_t k = 0; k < N; k++) {
+        const double *Q = q + 2 * n * k;
+        int fin = 1, ok = 1;
+        int64_t vol = 1;
+        for (int64_t j = 0; j < n; j++) {
+            const double lo = Q[2 * j], hi = Q[2 * j + 1];
+            const double *e = edges + off[j];
+            const int64_t m = off[j + 1] - off[j];
+            int64_t aj, bj;
+            if (!isfinite(lo) || !isfinite(hi)) fin = 0;
+            if (m == 1) {  /* every box flat in j */
+                if (contains) ok = 0; else ok &= (hi >= e[0]) && (lo <= e[0]);
+                aj = 0; bj = 1;
+            } else {
+                if (contains) {
+                    ok &= (lo >= e[0]) && (hi <= e[m - 1]);
+                    aj = upper_bound(e, m, lo) - 1;  /* e[a] <= lo */
+                    bj = lower_bound(e, m, hi);      /* e[b] >= hi */
+                } else {
+                    ok &= (hi >= e[0]) && (lo <= e[m - 1]);
+                    aj = lower_bound(e, m, lo) - 1;
+                    bj = upper_bound(e, m, hi);
+                }
+                if (aj < 0) aj = 0;
+                if (aj > m - 2) aj = m - 2;
+                if (bj < aj + 1) bj = aj + 1;
+                if (bj > m - 1) bj = m - 1;
+                vol *= bj - aj;
+            }
+            a[j] = aj; b[j] = bj;
+        }
+        if (!fin) { out[k] = contains ? 0 : 1; continue; }
+        if (!ok) { out[k] = 0; continue; }
+        int64_t tot = 0;
+        for (int64_t c = 0; c < ((int64_t)1 << n); c++) {
+            int64_t idx = 0; int na = 0;
+            for (int64_t j = 0; j < n; j++) {
+                if ((c >> j) & 1) idx += b[j] * stride[j]; else { idx += a[j] * stride[j]; na++; }
+            }
+            tot += (na & 1) ? -table[idx] : table[idx];
+        }
+        out[k] = contains ? (tot == vol) : (tot > 0);
+    }
+}
+"""
+_GRID_MAX_N = 16  # dimensions of the C loop (2**n look-ups per query)
+_grid_fn: list[Any] = []  # the loaded C function (or None), once per process
+
+
+def _grid_kernel() -> Any:
+    """The C grid query, or None (no compiler, ``CMPC_NATIVE=0``, or still compiling: the
+    numpy code answers meanwhile, with the same exact answers)."""
+    if _grid_fn:
+        return _grid_fn[0]
+    import ctypes
+
+    from ..interval._native import load_symbol
+
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    fn = load_symbol(_GRID_C, "cmpc_grid_query",
+                     [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr], wait=False)
+    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
+        _grid_fn.append(fn)
+    return fn or None
+
+
+def _unique_inverse(B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct bounds of the intervals ``B`` (N, 2), sorted, and the index of each of
+    the ``2 N`` bounds among them (``np.unique(B.ravel(), return_inverse=True)``).
+
+    In linear time when the bounds lie on the grid ``min + k h`` of the smallest positive
+    width ``h`` (a paving made by bisection): the codes ``k = rint((v - min) / h)`` are
+    accepted only if ``min + k h`` gives every bound back exactly, and then they are a
+    function of the value, injective (equal codes give equal values) and monotone, so
+    they order the bounds as the values do. Otherwise by sorting."""
+    v = B.ravel()
+    if B.shape[0] > 128 and np.isfinite(v).all():
+        w = B[:, 1] - B[:, 0]
+        w = w[w > 0]
+        if w.size:
+            lo, h = float(v.min()), float(w.min())
+            k = np.rint((v - lo) / h)
+            if k.max() <= 4 * v.size + 64:
+                k = k.astype(np.int64)
+                if (lo + k * h == v).all():
+                    present = np.bincount(k) > 0
+                    rank = np.cumsum(present) - 1
+                    return lo + np.flatnonzero(present) * h, rank[k]
+    e, inv = np.unique(v, return_inverse=True)
+    return e, inv.reshape(-1)
+
+
+def _clip_block(a: np.ndarray, b: np.ndarray, n_edges: int) -> None:
+    """In place: cell index ranges ``[a, b)`` clipped to the grid of ``n_edges`` edges and
+    holding at least one cell (``a`` in ``[0, n_edges - 2]``, ``b`` in ``[a + 1, n_edges -
+    1]``)."""
+    np.maximum(a, 0, out=a)
+    np.minimum(a, n_edges - 2, out=a)
+    np.maximum(b, a + 1, out=b)
+    np.minimum(b, n_edges - 1, out=b)
+
+
 class _BoxGrid:
     """Exact index of a union of closed boxes on the grid of their own bounds.
 
@@ -231,7 +359,14 @@ class _BoxGrid:
             return None
         full = U
         U = U[~flat]
-        edges = [np.unique(U[:, j, :]) for j in range(n)]
+        # the distinct bounds per coordinate, and each bound's index among them (exactly
+        # the searchsorted index of the bound: it is one of the edges)
+        edges, a, b = [], [], []
+        for j in range(n):
+            e, inv = _unique_inverse(U[:, j, :])
+            edges.append(e)
+            a.append(inv[0::2])  # first cell
+            b.append(inv[1::2])  # one past the last
         shape = tuple(max(e.size - 1, 1) for e in edges)
         if int(np.prod([s + 1 for s in shape], dtype=float)) > cls.MAX_CELLS:
             return None
@@ -241,15 +376,21 @@ class _BoxGrid:
         self.edges = edges
         self.shape = shape
         # difference array over the cells: +-1 at the 2**n corners of each box's index block
-        a = [np.searchsorted(edges[j], U[:, j, 0]) for j in range(n)]  # first cell
-        b = [np.searchsorted(edges[j], U[:, j, 1]) for j in range(n)]  # one past the last
         keep = np.ones(U.shape[0], dtype=bool)
         for j in range(n):
             keep &= b[j] > a[j]  # flat boxes cover no cell
-        diff = np.zeros(tuple(s + 1 for s in shape), dtype=np.int64)
+        dims = tuple(s + 1 for s in shape)
+        size = int(np.prod(dims))
+        diff = np.zeros(size, dtype=np.int64)
         for bits in itertools.product((0, 1), repeat=n):
-            idx = tuple((b[j] if bit else a[j])[keep] for j, bit in enumerate(bits))
-            np.add.at(diff, idx, (-1) ** sum(bits))
+            flat_idx = np.ravel_multi_index(
+                tuple((b[j] if bit else a[j])[keep] for j, bit in enumerate(bits)), dims)
+            count = np.bincount(flat_idx, minlength=size)
+            if sum(bits) % 2:
+                diff -= count
+            else:
+                diff += count
+        diff = diff.reshape(dims)
         cover = diff
         for j in range(n):
             cover = np.cumsum(cover, axis=j)
@@ -261,7 +402,25 @@ class _BoxGrid:
             inner = np.cumsum(inner, axis=j)
         table[tuple(slice(1, None) for _ in shape)] = inner
         self.table = table
+        # the layout of the C loop: the edges end to end, their offsets, the table strides
+        self._edges_cat = np.ascontiguousarray(np.concatenate(edges), dtype=np.float64)
+        self._off = np.cumsum([0] + [e.size for e in edges]).astype(np.int64)
+        self._stride = (np.asarray(table.strides, dtype=np.int64) // table.itemsize)
         return self
+
+    def _native(self, Q: np.ndarray, contains: bool) -> np.ndarray | None:
+        """The C loop's answers for the queries ``Q`` (N, n, 2), or None (no kernel)."""
+        n = Q.shape[1]
+        if n > _GRID_MAX_N or Q.shape[0] == 0:
+            return None
+        fn = _grid_kernel()
+        if fn is None:
+            return None
+        Q = np.ascontiguousarray(Q, dtype=np.float64)
+        out = np.empty(Q.shape[0], dtype=np.int8)
+        fn(Q.shape[0], n, Q.ctypes.data, self._edges_cat.ctypes.data, self._off.ctypes.data,
+           self.table.ctypes.data, self._stride.ctypes.data, int(contains), out.ctypes.data)
+        return out.view(bool)
 
     def polytope_inside(self, P: Any) -> bool:
         """Proven ``P ⊆ union`` for a bounded polytope P: P's rigorous bounding box lies in
@@ -314,6 +473,9 @@ class _BoxGrid:
             if (~thin).any():
                 out[~thin] = self.contains(Q[~thin])
             return out
+        got = self._native(Q, True)
+        if got is not None:
+            return got
         n = Q.shape[1]
         ok = np.isfinite(Q).all(axis=(1, 2))
         i0, i1, vol = [], [], np.ones(Q.shape[0], dtype=np.int64)
@@ -328,8 +490,7 @@ class _BoxGrid:
             ok &= (lo >= e[0]) & (hi <= e[-1])
             a = np.searchsorted(e, lo, side="right") - 1  # e[a] <= lo
             b = np.searchsorted(e, hi, side="left")  # e[b] >= hi
-            a = np.clip(a, 0, e.size - 2)
-            b = np.clip(b, a + 1, e.size - 1)
+            _clip_block(a, b, e.size)
             i0.append(a)
             i1.append(b)
             vol *= b - a
@@ -338,6 +499,15 @@ class _BoxGrid:
     def intersects(self, Q: np.ndarray) -> np.ndarray:
         """Exact ``Q[i] ∩ union ≠ ∅`` (closed boxes) for query boxes ``Q`` (N, n, 2): (N,)
         bool; True for a query with an infinite bound."""
+        got = self._native(Q, False)
+        if got is not None:
+            if self.flat.shape[0]:
+                ia, _ = _pairs(Q, self.flat)
+                got[ia] = True
+            return got
+        return self._intersects_numpy(Q)
+
+    def _intersects_numpy(self, Q: np.ndarray) -> np.ndarray:
         n = Q.shape[1]
         fin = np.isfinite(Q).all(axis=(1, 2))
         meet = np.ones(Q.shape[0], dtype=bool)
@@ -353,8 +523,7 @@ class _BoxGrid:
             # cells [e[i], e[i+1]] with e[i+1] >= lo and e[i] <= hi
             a = np.searchsorted(e, lo, side="left") - 1
             b = np.searchsorted(e, hi, side="right")
-            a = np.clip(a, 0, e.size - 2)
-            b = np.clip(b, a + 1, e.size - 1)
+            _clip_block(a, b, e.size)
             i0.append(a)
             i1.append(b)
         got = meet & (self._count(i0, i1) > 0)

@@ -59,6 +59,9 @@ MIN_CHUNK = 64  # elements: below this a task is not worth sending
 SUBTREE_MIN_S = 0.002
 
 _WORKER_CACHE: OrderedDict[str, Any] = OrderedDict()  # classifier bytes hash -> classifier
+# seconds per element last measured for a type of classifier (in this process): lets a
+# search cut its first level into tasks when an earlier search measured the cost
+_COST_HINT: dict[type, float] = {}
 
 
 def _dumps(obj: Any) -> bytes:
@@ -198,7 +201,7 @@ class LevelRunner:
                 labels = classify(frontier)
             labels = np.asarray(labels, dtype=np.int8)
             if N:
-                self._measure((time.perf_counter() - t0) / N)
+                self._measure((time.perf_counter() - t0) / N, classify)
             return labels
         return self._parallel(classify, frontier, N)
 
@@ -212,8 +215,8 @@ class LevelRunner:
         (the driver goes on alone). A task whose worker died runs here (with a warning)."""
         from .engine import part_ranges, task_frontier
 
-        if self.executor is None or self.cost is None \
-                or len(frontier) * self.cost < SUBTREE_MIN_S:
+        cost = self.cost_of(classify)
+        if self.executor is None or cost is None or len(frontier) * cost < SUBTREE_MIN_S:
             return None
         blob, key = self._serialised(classify)
         ranges = part_ranges(self.n_workers)
@@ -253,8 +256,14 @@ class LevelRunner:
             raise
         return out
 
-    def _measure(self, c: float) -> None:
+    def _measure(self, c: float, classify: Any) -> None:
         self.cost = c if self.cost is None else 0.5 * self.cost + 0.5 * c
+        _COST_HINT[type(classify)] = self.cost
+
+    def cost_of(self, classify: Any) -> float | None:
+        """Seconds per element: measured in this search, else the last measure of a
+        classifier of the same type in this process, else None."""
+        return self.cost if self.cost is not None else _COST_HINT.get(type(classify))
 
     def _serialised(self, classify: Any) -> tuple[bytes, str]:
         if self._blob is None or self._blob[0] != id(classify):
@@ -314,7 +323,7 @@ class LevelRunner:
             for fut in futures:
                 fut.cancel()
             raise
-        self._measure(spent / N)
+        self._measure(spent / N, classify)
         if two:
             labels = np.asarray(classify.combine(frontier, parts), dtype=np.int8)
         return labels

@@ -270,15 +270,15 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
 
     Notes
     -----
-    **Parts.** At the first level after the first with at least :data:`SPLIT_N` elements
-    (the first level measures the cost per element; a frontier that
+    **Parts.** At the first level with at least :data:`SPLIT_N` elements (a frontier that
     can ``split``, no ``on_level``, a one-phase classifier) every element is tagged with
     one of :data:`N_PARTS` parts (its group, or its index, modulo N_PARTS, bits reversed:
     neighbours go to different ranges of parts); descendants
     keep the tag, and from then on the records of each level are ordered by part (stably:
     within a part, in the order of the search). The searches below different parts are
-    independent, so with an ``executor`` the rest of the search runs as one task per
-    worker, each on a contiguous range of parts, and their records are joined level by
+    independent, so with an ``executor`` the rest of the search (from the first level
+    whose cost per element is known: measured by this search, or by an earlier one with a
+    classifier of the same type) runs as one task per worker, each on a contiguous range of parts, and their records are joined level by
     level: the same elements in the same order as the serial search, which orders its
     records the same way. Should the joined run exceed ``max_boxes``, the search goes on
     serially from the split level instead (the serial result, budget included).
@@ -305,6 +305,7 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     runner = LevelRunner(executor)
     scope = InterruptScope()
     tagged = bool(_tagged)
+    pending = False  # tagged, and the parts not yet sent to the executor
     partition = (splits and hasattr(frontier, "data") and on_level is None
                  and not _two_phase(classify))
     try:
@@ -315,31 +316,35 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             if time_limit is not None and time.perf_counter() - t0 > time_limit:
                 status, message = Status.BUDGET, f"time_limit = {time_limit} s reached"
                 break
-            if partition and not tagged and level >= 1 and len(frontier) >= SPLIT_N:
+            if partition and not tagged and len(frontier) >= SPLIT_N:
                 frontier, tagged = _tag(frontier), True
-                if runner.executor is not None:
-                    left = None if time_limit is None else \
-                        time_limit - (time.perf_counter() - t0)
-                    subs = runner.subtrees(classify, frontier, eps, keep_outer,
-                                           max_boxes - n_classified, left)
-                    joined = None if subs is None else _join_tasks(subs)
-                    if joined is not None and (joined["status"] != Status.BUDGET or
-                                               joined["message"].startswith("time_limit")) \
-                            and _within(joined["done"], n_classified, max_boxes):
-                        for k, d in enumerate(joined["done"]):
-                            history.append({"level": level + k, "classified": d[5],
-                                            "inner": 0 if d[0] is None else len(d[0]),
-                                            "outer": d[4], "boundary": sum(
-                                                len(p) for p in d[2:4] if p is not None)})
-                            if not bar.disable:
-                                bar.update(d[5])
-                        done = done + joined["done"]
-                        n_classified += sum(d[5] for d in joined["done"])
-                        level += len(joined["done"])
-                        status, message = joined["status"], joined["message"]
-                        frontier = joined["left"] if joined["left"] is not None else \
-                            frontier.take(np.zeros(len(frontier), dtype=bool))
-                        break
+                pending = runner.executor is not None
+            # the parts go to the workers at the first level whose cost per element is known
+            # (measured by an earlier search with this type of classifier, or by this one)
+            if pending and runner.cost_of(classify) is not None:
+                pending = False
+                left = None if time_limit is None else \
+                    time_limit - (time.perf_counter() - t0)
+                subs = runner.subtrees(classify, frontier, eps, keep_outer,
+                                       max_boxes - n_classified, left)
+                joined = None if subs is None else _join_tasks(subs)
+                if joined is not None and (joined["status"] != Status.BUDGET or
+                                           joined["message"].startswith("time_limit")) \
+                        and _within(joined["done"], n_classified, max_boxes):
+                    for k, d in enumerate(joined["done"]):
+                        history.append({"level": level + k, "classified": d[5],
+                                        "inner": 0 if d[0] is None else len(d[0]),
+                                        "outer": d[4], "boundary": sum(
+                                            len(p) for p in d[2:4] if p is not None)})
+                        if not bar.disable:
+                            bar.update(d[5])
+                    done = done + joined["done"]
+                    n_classified += sum(d[5] for d in joined["done"])
+                    level += len(joined["done"])
+                    status, message = joined["status"], joined["message"]
+                    frontier = joined["left"] if joined["left"] is not None else \
+                        frontier.take(np.zeros(len(frontier), dtype=bool))
+                    break
             labels = runner(classify, frontier)
             reduce = getattr(frontier, "reduce", None)
             small = None

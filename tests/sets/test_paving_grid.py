@@ -39,3 +39,76 @@ def test_paving_uses_the_grid_for_large_unions_and_stays_exact():
     inside = P.contains(pts, view="inner")
     thin = np.stack([pts, pts], axis=-1)
     assert (P.contains_box(thin, view="inner") == inside).all()
+
+
+def _grid_c_loaded() -> bool:
+    """Load the C grid query (waiting for its compilation); False without a compiler."""
+    import ctypes
+
+    from casadi_cmpc.interval._native import load_symbol
+    from casadi_cmpc.sets import _boxunion as bu
+
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    fn = load_symbol(bu._GRID_C, "cmpc_grid_query", [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr])
+    bu._grid_fn[:] = [fn]
+    return fn is not None
+
+
+@settings(max_examples=120, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 4), k=st.integers(1, 40),
+       scale=st.sampled_from([1.0, 1e-3, 37.0]), shift=st.sampled_from([0.0, -5.0, 1e3]))
+def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
+    """The C loop and the numpy code answer every query alike: faces, flat unions, queries
+    sticking out of the grid, infinite and NaN bounds (intersects: True; contains: False)."""
+    import pytest
+
+    from casadi_cmpc.sets import _boxunion as bu
+
+    if not _grid_c_loaded():
+        pytest.skip("no C compiler")
+    rng = np.random.default_rng(seed)
+    U = np.sort(rng.integers(0, 6, (k, n, 2)).astype(float), axis=-1) * scale + shift
+    if rng.random() < 0.2:  # every box flat in one coordinate
+        U[:, 0, 1] = U[:, 0, 0] = U[0, 0, 0]
+        U[0, 1 % n, 1] = U[0, 1 % n, 0] + scale
+    Q = rng.integers(-2, 8, (200, n, 2)).astype(float)
+    Q += (rng.random(Q.shape) < 0.3) * rng.random(Q.shape)
+    Q = np.sort(Q, axis=-1) * scale + shift
+    odd = rng.random(Q.shape) < 0.02
+    Q[odd] = rng.choice([np.inf, -np.inf, np.nan], size=int(odd.sum()))
+    G = _BoxGrid.build(U)
+    if G is None:
+        return
+    fat = ~(Q[..., 1] <= Q[..., 0]).any(axis=1)  # contains sends thin queries elsewhere
+    got_c = G._native(Q[fat], True)
+    assert got_c is not None
+    got_i = G.intersects(Q)
+    saved = bu._grid_fn[:]
+    bu._grid_fn[:] = [None]
+    try:
+        ref_c = G.contains(Q[fat])
+        ref_i = G.intersects(Q)
+    finally:
+        bu._grid_fn[:] = saved
+    assert (got_c == ref_c).all()
+    assert (got_i == ref_i).all()
+    assert G.intersects(Q)[~np.isfinite(Q).all(axis=(1, 2))].all()
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(129, 600), span=st.integers(1, 3000),
+       h=st.sampled_from([0.1, 1 / 3, 2.0 ** -7, 1e-9, 37.0]),
+       lo=st.sampled_from([0.0, -1.0, 0.3, -1e3, 1e6]), jitter=st.booleans())
+def test_linear_time_unique_equals_numpy(seed, n, span, h, lo, jitter):
+    """The grid fast path of the bound index gives np.unique's answer exactly, on grids
+    that floating point reproduces and on those it does not (then: by sorting)."""
+    from casadi_cmpc.sets._boxunion import _unique_inverse
+
+    rng = np.random.default_rng(seed)
+    B = lo + np.sort(rng.integers(0, span + 1, (n, 2)), axis=-1) * h
+    if jitter:  # one bound off the grid
+        B[rng.integers(n), rng.integers(2)] += 0.37 * h
+        B = np.sort(B, axis=-1)
+    e, inv = _unique_inverse(B)
+    e2, inv2 = np.unique(B.ravel(), return_inverse=True)
+    assert np.array_equal(e, e2) and np.array_equal(inv, inv2.reshape(-1))
