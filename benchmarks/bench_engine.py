@@ -199,7 +199,8 @@ def one_step_3state() -> dict:
         ok[todo] |= ((Y[:, :, 0] >= -0.4) & (Y[:, :, 1] <= 0.4)).all(axis=1)
     t_grid = time.perf_counter() - t0
     return {"ours_s": t_ours, "ours_pairs_per_s": K.n_pairs / t_ours,
-            "ours_volume": float(K.area()), "affine_state_s": t_aff, "affine_state_volume": float(Ka.area()),
+            "ours_volume": float(K.area()), "affine_state_s": t_aff,
+            "affine_state_volume": float(Ka.area()),
             "affine_state_method": Ka.pieces is not None, "grid_s": t_grid,
             "grid_pairs_per_s": pairs / t_grid, "grid_volume": float(ok.sum() * (2 / k) ** 3),
             "pairs_per_s_ours_over_grid": (K.n_pairs / t_ours) / (pairs / t_grid),

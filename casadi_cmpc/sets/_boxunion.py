@@ -207,14 +207,20 @@ _GRID_C = r"""
 static int64_t lower_bound(const double *e, int64_t m, double x)
 {   /* first i with e[i] >= x */
     int64_t lo = 0, hi = m;
-    while (lo < hi) { int64_t mid = lo + (hi - lo) / 2; if (e[mid] < x) lo = mid + 1; else hi = mid; }
+    while (lo < hi) {
+        int64_t mid = lo + (hi - lo) / 2;
+        if (e[mid] < x) lo = mid + 1; else hi = mid;
+    }
     return lo;
 }
 
 static int64_t upper_bound(const double *e, int64_t m, double x)
 {   /* first i with e[i] > x */
     int64_t lo = 0, hi = m;
-    while (lo < hi) { int64_t mid = lo + (hi - lo) / 2; if (e[mid] <= x) lo = mid + 1; else hi = mid; }
+    while (lo < hi) {
+        int64_t mid = lo + (hi - lo) / 2;
+        if (e[mid] <= x) lo = mid + 1; else hi = mid;
+    }
     return lo;
 }
 
