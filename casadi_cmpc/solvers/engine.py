@@ -280,8 +280,9 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     whose cost per element is known: measured by this search, or by an earlier one with a
     classifier of the same type) runs as one task per worker, each on a contiguous range
     of parts, and their records are joined level by level: the same elements in the same
-    order as the serial search, which orders its records the same way. Should the joined run exceed ``max_boxes``, the search goes on
-    serially from the split level instead (the serial result, budget included).
+    order as the serial search, which orders its records the same way. Should the joined
+    run exceed ``max_boxes``, the search goes on serially from the split level instead
+    (the serial result, budget included).
     """
     with warnings.catch_warnings():
         # in a notebook without ipywidgets tqdm.auto warns, then uses the text bar
