@@ -25,6 +25,7 @@ from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
+from ..sets._boxunion import _compact_union
 from ..sets.box import Box
 from ..sets.paving import Paving
 from ..sets.polytope import Polytope, PolytopeUnion
@@ -1081,6 +1082,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo})
     frontier = D.as_array()[None]
     inner = np.zeros((0, model.n, 2))
+    compact = inner  # the same union as inner, in fewer boxes: what the searches test
     target: Any = T
     polys: list[Polytope] = []
     seq.status = "max_steps"
@@ -1126,6 +1128,9 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                 K = seq.sets[-1]
             else:
                 K = SetUnion([T, Paving(inner=inner, domain=D)], dim=model.n)
+                # the next search asks only "in K?" and "meets K?" of boxes, exact tests
+                # on the union: the same answers from the same union in far fewer boxes
+                compact = _compact_union(np.concatenate([compact, new]))
             if searched:
                 step["seconds"] = time.perf_counter() - ts
             seq.steps.append(step)
@@ -1148,7 +1153,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
             if stop is not None:
                 seq.status = stop
                 break
-            target = K
+            target = K if polytopic else SetUnion(
+                [T, Paving(inner=compact, domain=D)], dim=model.n)
     except KeyboardInterrupt:
         scope.reraise_if_nested()
         seq.status = "interrupted"

@@ -204,8 +204,27 @@ _GRID_C = r"""
 #include <math.h>
 #include <stdint.h>
 
-static int64_t lower_bound(const double *e, int64_t m, double x)
+/* The index searches start from a hint when the edges of a coordinate lie on a uniform
+   grid glo + k h (hint[k]: the number of edges below grid point k), found in O(1); the
+   walks then end on the exact answer whatever the hint (comparisons with the edges only).
+   ginv == 0: no hint, binary search. */
+static int64_t hint_of(double x, double glo, double ginv, const int64_t *hint, int64_t K)
+{
+    double t = (x - glo) * ginv;
+    int64_t k;
+    if (!(t >= 0.0)) k = 0; else if (t >= (double)K) k = K; else k = (int64_t)t;
+    return hint[k];
+}
+
+static int64_t lower_bound(const double *e, int64_t m, double x, double glo, double ginv,
+                           const int64_t *hint, int64_t K)
 {   /* first i with e[i] >= x */
+    if (ginv != 0.0) {
+        int64_t i = hint_of(x, glo, ginv, hint, K);
+        while (i > 0 && e[i - 1] >= x) i--;
+        while (i < m && e[i] < x) i++;
+        return i;
+    }
     int64_t lo = 0, hi = m;
     while (lo < hi) {
         int64_t mid = lo + (hi - lo) / 2;
@@ -214,8 +233,15 @@ static int64_t lower_bound(const double *e, int64_t m, double x)
     return lo;
 }
 
-static int64_t upper_bound(const double *e, int64_t m, double x)
+static int64_t upper_bound(const double *e, int64_t m, double x, double glo, double ginv,
+                           const int64_t *hint, int64_t K)
 {   /* first i with e[i] > x */
+    if (ginv != 0.0) {
+        int64_t i = hint_of(x, glo, ginv, hint, K);
+        while (i > 0 && e[i - 1] > x) i--;
+        while (i < m && e[i] <= x) i++;
+        return i;
+    }
     int64_t lo = 0, hi = m;
     while (lo < hi) {
         int64_t mid = lo + (hi - lo) / 2;
@@ -226,7 +252,8 @@ static int64_t upper_bound(const double *e, int64_t m, double x)
 
 void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
                      const int64_t *off, const int64_t *table, const int64_t *stride,
-                     int64_t contains, int8_t *out)
+                     int64_t contains, int8_t *out, const double *glo, const double *ginv,
+                     const int64_t *hints, const int64_t *hoff)
 {
     int64_t a[32], b[32];
     for (int64_t k = 0; k < N; k++) {
@@ -237,6 +264,7 @@ void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
             const double lo = Q[2 * j], hi = Q[2 * j + 1];
             const double *e = edges + off[j];
             const int64_t m = off[j + 1] - off[j];
+            const int64_t *h = hints + hoff[j], K = hoff[j + 1] - hoff[j] - 1;
             int64_t aj, bj;
             if (!isfinite(lo) || !isfinite(hi)) fin = 0;
             if (m == 1) {  /* every box flat in j */
@@ -245,12 +273,12 @@ void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
             } else {
                 if (contains) {
                     ok &= (lo >= e[0]) && (hi <= e[m - 1]);
-                    aj = upper_bound(e, m, lo) - 1;  /* e[a] <= lo */
-                    bj = lower_bound(e, m, hi);      /* e[b] >= hi */
+                    aj = upper_bound(e, m, lo, glo[j], ginv[j], h, K) - 1;  /* e[a] <= lo */
+                    bj = lower_bound(e, m, hi, glo[j], ginv[j], h, K);      /* e[b] >= hi */
                 } else {
                     ok &= (hi >= e[0]) && (lo <= e[m - 1]);
-                    aj = lower_bound(e, m, lo) - 1;
-                    bj = upper_bound(e, m, hi);
+                    aj = lower_bound(e, m, lo, glo[j], ginv[j], h, K) - 1;
+                    bj = upper_bound(e, m, hi, glo[j], ginv[j], h, K);
                 }
                 if (aj < 0) aj = 0;
                 if (aj > m - 2) aj = m - 2;
@@ -289,13 +317,15 @@ def _grid_kernel() -> Any:
 
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
     fn = load_symbol(_GRID_C, "cmpc_grid_query",
-                     [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr], wait=False)
+                     [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr, ptr, ptr, ptr, ptr],
+                     wait=False)
     if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
         _grid_fn.append(fn)
     return fn or None
 
 
-def _unique_inverse(B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _unique_inverse(B: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, tuple[float, float, np.ndarray] | None]:
     """The distinct bounds of the intervals ``B`` (N, 2), sorted, and the index of each of
     the ``2 N`` bounds among them (``np.unique(B.ravel(), return_inverse=True)``).
 
@@ -303,7 +333,8 @@ def _unique_inverse(B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     width ``h`` (a paving made by bisection): the codes ``k = rint((v - min) / h)`` are
     accepted only if ``min + k h`` gives every bound back exactly, and then they are a
     function of the value, injective (equal codes give equal values) and monotone, so
-    they order the bounds as the values do. Otherwise by sorting."""
+    they order the bounds as the values do. Otherwise by sorting. Third: ``(min, h, codes
+    of the distinct bounds)`` on the fast path, else None."""
     v = B.ravel()
     if B.shape[0] > 128 and np.isfinite(v).all():
         w = B[:, 1] - B[:, 0]
@@ -316,9 +347,10 @@ def _unique_inverse(B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 if (lo + k * h == v).all():
                     present = np.bincount(k) > 0
                     rank = np.cumsum(present) - 1
-                    return lo + np.flatnonzero(present) * h, rank[k]
+                    codes = np.flatnonzero(present)
+                    return lo + codes * h, rank[k], (lo, h, codes)
     e, inv = np.unique(v, return_inverse=True)
-    return e, inv.reshape(-1)
+    return e, inv.reshape(-1), None
 
 
 def _clip_block(a: np.ndarray, b: np.ndarray, n_edges: int) -> None:
@@ -367,10 +399,11 @@ class _BoxGrid:
         U = U[~flat]
         # the distinct bounds per coordinate, and each bound's index among them (exactly
         # the searchsorted index of the bound: it is one of the edges)
-        edges, a, b = [], [], []
+        edges, a, b, grids = [], [], [], []
         for j in range(n):
-            e, inv = _unique_inverse(U[:, j, :])
+            e, inv, grid = _unique_inverse(U[:, j, :])
             edges.append(e)
+            grids.append(grid)
             a.append(inv[0::2])  # first cell
             b.append(inv[1::2])  # one past the last
         shape = tuple(max(e.size - 1, 1) for e in edges)
@@ -412,6 +445,19 @@ class _BoxGrid:
         self._edges_cat = np.ascontiguousarray(np.concatenate(edges), dtype=np.float64)
         self._off = np.cumsum([0] + [e.size for e in edges]).astype(np.int64)
         self._stride = (np.asarray(table.strides, dtype=np.int64) // table.itemsize)
+        # search hints of the coordinates whose edges lie on a uniform grid lo + k h: per
+        # grid point k, the number of edges below it (see _GRID_C)
+        glo, ginv, hints = np.zeros(n), np.zeros(n), []
+        for j, grid in enumerate(grids):
+            if grid is None or edges[j].size < 2:
+                hints.append(np.zeros(1, dtype=np.int64))
+                continue
+            glo[j], ginv[j] = grid[0], 1.0 / grid[1]
+            codes = grid[2]
+            hints.append(np.searchsorted(codes, np.arange(codes[-1] + 1)).astype(np.int64))
+        self._glo, self._ginv = glo, ginv
+        self._hints = np.ascontiguousarray(np.concatenate(hints), dtype=np.int64)
+        self._hoff = np.cumsum([0] + [h.size for h in hints]).astype(np.int64)
         return self
 
     def _native(self, Q: np.ndarray, contains: bool) -> np.ndarray | None:
@@ -425,7 +471,9 @@ class _BoxGrid:
         Q = np.ascontiguousarray(Q, dtype=np.float64)
         out = np.empty(Q.shape[0], dtype=np.int8)
         fn(Q.shape[0], n, Q.ctypes.data, self._edges_cat.ctypes.data, self._off.ctypes.data,
-           self.table.ctypes.data, self._stride.ctypes.data, int(contains), out.ctypes.data)
+           self.table.ctypes.data, self._stride.ctypes.data, int(contains), out.ctypes.data,
+           self._glo.ctypes.data, self._ginv.ctypes.data, self._hints.ctypes.data,
+           self._hoff.ctypes.data)
         return out.view(bool)
 
     def polytope_inside(self, P: Any) -> bool:
@@ -537,6 +585,32 @@ class _BoxGrid:
             ia, _ = _pairs(Q, self.flat)
             got[ia] = True
         return np.where(fin, got, True)
+
+
+def _compact_union(U: np.ndarray) -> np.ndarray:
+    """Boxes (K, n, 2) with the same closed union as ``U`` (N, n, 2), usually far fewer:
+    the covered cells of the grid of ``U``'s bounds (:class:`_BoxGrid`), merged into runs
+    along the last coordinate, each run one box whose bounds are bounds of ``U`` (exact);
+    boxes of ``U`` of zero width in some coordinate are kept as they are. ``U`` itself when
+    no grid is built (small, unbounded or too fine unions)."""
+    G = _BoxGrid.build(U) if U.shape[0] >= 64 else None
+    if G is None:
+        return U
+    n = U.shape[1]
+    idx = np.argwhere(G.covered)  # (K, n), C order: runs along the last axis are adjacent
+    if idx.shape[0] == 0:
+        return G.flat
+    last = idx[:, -1]
+    brk = np.ones(idx.shape[0], dtype=bool)
+    brk[1:] = (last[1:] != last[:-1] + 1) | (idx[1:, :-1] != idx[:-1, :-1]).any(axis=1)
+    first = np.flatnonzero(brk)
+    stop = np.append(first[1:], idx.shape[0]) - 1  # the last cell of each run
+    out = np.empty((first.size, n, 2))
+    for j in range(n):
+        e = G.edges[j]
+        out[:, j, 0] = e[idx[first, j]]
+        out[:, j, 1] = e[idx[stop, j] + 1]
+    return np.concatenate([out, G.flat]) if G.flat.shape[0] else out
 
 
 def _union_volume(U: np.ndarray) -> float:

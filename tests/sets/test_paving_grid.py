@@ -55,11 +55,13 @@ def _grid_c_loaded() -> bool:
 
 
 @settings(max_examples=120, deadline=None)
-@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 4), k=st.integers(1, 40),
-       scale=st.sampled_from([1.0, 1e-3, 37.0]), shift=st.sampled_from([0.0, -5.0, 1e3]))
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 4), k=st.integers(1, 300),
+       scale=st.sampled_from([1.0, 1e-3, 37.0, 0.1]), shift=st.sampled_from([0.0, -5.0, 1e3]))
 def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
     """The C loop and the numpy code answer every query alike: faces, flat unions, queries
-    sticking out of the grid, infinite and NaN bounds (intersects: True; contains: False)."""
+    sticking out of the grid, infinite and NaN bounds (intersects: True; contains: False),
+    with the binary searches (unions of up to 128 boxes) and with the search hints of
+    bounds on a uniform grid (larger unions; scale 0.1: not exactly on one)."""
     import pytest
 
     from casadi_cmpc.sets import _boxunion as bu
@@ -109,6 +111,8 @@ def test_linear_time_unique_equals_numpy(seed, n, span, h, lo, jitter):
     if jitter:  # one bound off the grid
         B[rng.integers(n), rng.integers(2)] += 0.37 * h
         B = np.sort(B, axis=-1)
-    e, inv = _unique_inverse(B)
+    e, inv, grid = _unique_inverse(B)
+    if grid is not None:  # the codes of the distinct bounds give them back
+        assert np.array_equal(grid[0] + grid[2] * grid[1], e)
     e2, inv2 = np.unique(B.ravel(), return_inverse=True)
     assert np.array_equal(e, e2) and np.array_equal(inv, inv2.reshape(-1))
