@@ -800,8 +800,10 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
 
 
 def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
-                    assume_invariant: bool, robust: bool, eps: float, X: Box) -> Any:
-    """The certificate of T's invariance, or a clear error."""
+                    assume_invariant: bool, robust: bool, eps: float, X: Box,
+                    executor: Any = None) -> Any:
+    """The certificate of T's invariance (certified on ``executor`` when given), or a clear
+    error."""
     from ..solvers.result import Certificate
     from .invariance import certify_invariant
 
@@ -840,7 +842,8 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
     W = W_need
     size = float(np.max(T.bounding_box().diam))
     for e in (0.02, 0.005, 0.0015, 0.0005):  # finer pieces (relative to T) while undecided
-        cert = certify_invariant(model, T, law, eps=e * size, W=W, time_limit=60)
+        cert = certify_invariant(model, T, law, eps=e * size, W=W, time_limit=60,
+                                 executor=executor)
         if cert.proved is not None:
             break
     if cert.proved is not True:
@@ -1052,7 +1055,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
             raise ValueError("obstacles, checkpoint and executor are for method='general'")
         if not 0 < u_eps <= 1:
             raise ValueError(f"u_eps must be in (0, 1]; got {u_eps}")
-        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
+        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D,
+                               executor)
         return affine_state_sequence(
             model, T, eps, robust=robust, polytopic_method=polytopic_method,
             max_steps=max_steps,
@@ -1068,7 +1072,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     saved = None if ck is None else ck.load(key)
     tinfo = _stored_terminal(model, saved, law, certificate, assume_invariant, robust)
     if tinfo is None:
-        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D)
+        cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D,
+                               executor)
         tinfo = {"terminal_certificate": cert.label, **_terminal_info(model, cert)}
     key.append(terminal_part(tinfo))
     done: list[dict[str, Any]] = []  # steps completed in the checkpoint (replayed)
