@@ -350,12 +350,13 @@ class Paving(SetBase):
         return _covered(q, self.view_boxes(view))
 
     def _grid(self, view: str, n_queries: int) -> _BoxGrid | None:
-        """The exact grid index of a view (built once, for unions of 64 boxes or more)."""
+        """The exact grid index of a view (built once, for unions of 64 boxes or more, or
+        at the first batch of 32 queries or more)."""
         key = ("grid", str(view).lower())
         if key in self._cache:
             return self._cache[key]
         U = self.view_boxes(view)
-        if U.shape[0] < 64:
+        if U.shape[0] < 64 and (n_queries < 32 or U.shape[0] < 2):
             return None
         if key not in self._cache:
             self._cache[key] = _BoxGrid.build(U)

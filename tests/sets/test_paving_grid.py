@@ -116,3 +116,21 @@ def test_linear_time_unique_equals_numpy(seed, n, span, h, lo, jitter):
         assert np.array_equal(grid[0] + grid[2] * grid[1], e)
     e2, inv2 = np.unique(B.ravel(), return_inverse=True)
     assert np.array_equal(e, e2) and np.array_equal(inv, inv2.reshape(-1))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 3), k=st.integers(1, 63),
+       q=st.sampled_from([1, 31, 32, 200]))
+def test_small_unions_answer_exactly_by_either_path(seed, n, k, q):
+    """A union of fewer than 64 boxes is indexed by the grid at the first batch of 32
+    queries or more (pairwise routines below): the same exact answers either way."""
+    rng = np.random.default_rng(seed)
+    U = np.sort(rng.integers(0, 6, (k, n, 2)).astype(float), axis=-1) * 0.3 - 1.0
+    Q = np.sort(rng.integers(-1, 7, (q, n, 2)).astype(float) * 0.3 - 1.0
+                + (rng.random((q, n, 2)) < 0.3) * 0.1, axis=-1)
+    P = cm.Paving(inner=U)
+    assert (P.contains_box(Q, view="inner") == _covered(Q, U)).all()
+    ref = np.zeros(q, dtype=bool)
+    ia, _ = _pairs(Q, U)
+    ref[ia] = True
+    assert (P.intersects_box(Q, view="inner") == ref).all()
