@@ -117,10 +117,16 @@ class _ComponentClassifier:
     (inner means "f is defined and in Y at every point").
     """
 
+    #: levels of at least this many boxes are evaluated in one call of the function's
+    #: native kernel (every element at once) once the function has moved to it
+    JOINT_MIN = 256
+
     def __init__(self, comps: list[tuple[Any, Thresholds]], open_target: bool,
-                 step: int) -> None:
+                 step: int, joint: tuple[InclusionFunction, list[Thresholds]] | None = None
+                 ) -> None:
         self.comps = [getattr(ev, "unchecked", ev) for ev, _ in comps]
         self.thresholds = [t for _, t in comps]
+        self.joint = joint
         self.open_target = open_target
         self.step = step
         k = len(comps)
@@ -137,7 +143,11 @@ class _ComponentClassifier:
     def _test(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
         """(inside, outside) proven for element ``c`` over the boxes ``lo``, ``hi`` (N, n)."""
         l, h = self.comps[c](lo, hi)
-        t = self.thresholds[c]
+        return self._decide(l, h, self.thresholds[c], lo.shape[0])
+
+    def _decide(self, l: Any, h: Any, t: Thresholds, N: int) -> tuple[Any, Any]:
+        """(inside, outside) proven from the enclosure ``[l, h]`` of an element and its
+        thresholds ``t``."""
         ins = out = None
         if t.in_lo is not None:
             if self.open_target:
@@ -154,9 +164,24 @@ class _ComponentClassifier:
         if ins is None:  # no finite bound: inside Y wherever the element is defined
             ins, out = _defined(l, h), False
         if np.ndim(ins) == 0 or np.ndim(out) == 0:  # a constant element
-            N = lo.shape[0]
             return np.broadcast_to(ins, (N,)), np.broadcast_to(out, (N,))
         return ins, out
+
+    def _joint_image(self, fr: BoxFrontier) -> np.ndarray | None:
+        """Every element's enclosure (N, k, 2) by one call of the native kernel, for a
+        large level of a function that has moved to it (see
+        :meth:`InclusionFunction.evaluate_unchecked`: the move depends on the calls made,
+        not on timings); None: the elements are evaluated one by one."""
+        if self.joint is None or len(fr) < self.JOINT_MIN:
+            return None
+        F = self.joint[0]
+        N = len(fr)
+        if not F._wants_native(N):
+            return None
+        run = F._native_kernel()
+        if run is None:
+            return None
+        return run([np.stack([fr.lo, fr.hi], axis=-1)], N)[0]
 
     def _bounds(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         N = lo.shape[0]
@@ -182,9 +207,17 @@ class _ComponentClassifier:
         if mask is None or mask.shape != (N,) or mask.dtype != self.dtype:
             mask = np.full(N, self.all_open, dtype=self.dtype)
         outer = np.zeros(N, dtype=bool)
+        img = self._joint_image(fr)
         for c, (bit, clear) in enumerate(self.bits):
             idx = (mask & bit).nonzero()[0]
             if idx.size == 0:
+                continue
+            if img is not None:  # the enclosure of f_c itself, against its own bounds
+                ins, out = self._decide(img[idx, c, 0], img[idx, c, 1], self.joint[1][c],
+                                        idx.size)
+                outer[idx[out]] = True
+                sel = idx[ins]
+                mask[sel] = mask.take(sel) & clear
                 continue
             if idx.size > 0.9 * N:  # nearly all open: evaluating all avoids the gathers
                 ins, out = self._bounds(c, fr.lo, fr.hi)
@@ -320,7 +353,9 @@ def image_classifier(F: InclusionFunction, Y: Any, open_target: bool = False):
                 if core is not None:  # f_j = affine steps of a core expression
                     ev, steps = core
                 comps.append((ev, Thresholds.through(float(ylo[j]), float(yhi[j]), steps)))
-            return _ComponentClassifier(comps, open_target, step)
+            raw = [Thresholds.through(float(ylo[j]), float(yhi[j]), []) for j in range(m)]
+            joint = (F, raw) if F.kind == "natural" and F._keep is None else None
+            return _ComponentClassifier(comps, open_target, step, joint)
 
         def classify(fr: BoxFrontier) -> np.ndarray:
             N = len(fr)

@@ -538,6 +538,44 @@ def test_component_and_joint_evaluation_give_the_same_paving(F_routh, routh_pavi
             sorted(map(tuple, b.reshape(len(b), -1).tolist()))
 
 
+def test_native_joint_levels_are_sound_and_give_the_routh_paving(monkeypatch):
+    """Large levels of a function that has moved to its native kernel are evaluated in one
+    call (every element at once, against its own bounds): the labels hold exactly at sampled
+    points (rational arithmetic), and the Routh paving is that of the component path."""
+    from casadi_cmpc.interval._native import native_available
+
+    if not native_available():
+        pytest.skip("no C compiler")
+    mod = __import__("casadi_cmpc.solvers.sivia", fromlist=["_ComponentClassifier"])
+    calls = []
+    orig = mod._ComponentClassifier._joint_image
+
+    def counted(self, fr):
+        img = orig(self, fr)
+        calls.append(img is not None)
+        return img
+
+    F = cm.interval.inclusion(_routh_function())
+    F.native_after = 0  # on the native kernel from the first large level
+    monkeypatch.setattr(mod._ComponentClassifier, "JOINT_MIN", 16)
+    monkeypatch.setattr(mod._ComponentClassifier, "_joint_image", counted)
+    P = cm.sivia(F, X0_ROUTH, Y_POS, 0.05, open_target=True, progress=False)
+    assert any(calls)
+    for b in P.inner[::37]:
+        for c in corners(b[None])[0]:
+            assert all(v > 0 for v in routh_exact(*c))
+    for b in P.outside[::37]:
+        for c in corners(b[None])[0]:
+            assert any(v <= 0 for v in routh_exact(*c))
+    monkeypatch.setattr(mod._ComponentClassifier, "JOINT_MIN", 10 ** 9)
+    Q = cm.sivia(cm.interval.inclusion(_routh_function()), X0_ROUTH, Y_POS, 0.05,
+                 open_target=True, progress=False)
+    for view in ("inner", "boundary", "outside"):
+        a, b = getattr(P, view), getattr(Q, view)
+        assert sorted(map(tuple, a.reshape(len(a), -1).tolist())) == \
+            sorted(map(tuple, b.reshape(len(b), -1).tolist()))
+
+
 def test_two_sided_targets_per_component():
     x = ca.SX.sym("x", 2)
     f = ca.Function("ring", [x], [ca.vertcat(x[0] ** 2 + x[1] ** 2, x[0] - x[1])])
