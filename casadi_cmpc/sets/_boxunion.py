@@ -592,7 +592,8 @@ def _compact_union(U: np.ndarray) -> np.ndarray:
     the covered cells of the grid of ``U``'s bounds (:class:`_BoxGrid`), merged into runs
     along the last coordinate, each run one box whose bounds are bounds of ``U`` (exact);
     boxes of ``U`` of zero width in some coordinate are kept as they are. ``U`` itself when
-    no grid is built (small, unbounded or too fine unions)."""
+    no grid is built (small, unbounded or too fine unions) or when the runs would not be
+    fewer than the boxes."""
     G = _BoxGrid.build(U) if U.shape[0] >= 64 else None
     if G is None:
         return U
@@ -604,6 +605,8 @@ def _compact_union(U: np.ndarray) -> np.ndarray:
     brk = np.ones(idx.shape[0], dtype=bool)
     brk[1:] = (last[1:] != last[:-1] + 1) | (idx[1:, :-1] != idx[:-1, :-1]).any(axis=1)
     first = np.flatnonzero(brk)
+    if first.size + G.flat.shape[0] >= U.shape[0]:  # no fewer boxes (e.g. tall thin ones)
+        return U
     stop = np.append(first[1:], idx.shape[0]) - 1  # the last cell of each run
     out = np.empty((first.size, n, 2))
     for j in range(n):

@@ -134,3 +134,43 @@ def test_small_unions_answer_exactly_by_either_path(seed, n, k, q):
     ia, _ = _pairs(Q, U)
     ref[ia] = True
     assert (P.intersects_box(Q, view="inner") == ref).all()
+
+
+@settings(max_examples=120, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 3), k=st.integers(1, 200),
+       flat=st.booleans())
+def test_compacted_union_is_the_same_closed_set(seed, n, k, flat):
+    """The runs of covered grid cells cover exactly the union: each box of either list lies
+    in the union of the other (exact tests), flat boxes are kept, and the runs never
+    outnumber the boxes (the boxes themselves are kept then)."""
+    from casadi_cmpc.sets._boxunion import _compact_union
+
+    rng = np.random.default_rng(seed)
+    U = np.sort(rng.integers(0, 8, (k, n, 2)).astype(float), axis=-1) * 0.25 - 1.0
+    U = U[(U[..., 1] > U[..., 0]).all(axis=1)]
+    if flat:
+        F = np.sort(rng.integers(0, 8, (3, n, 2)).astype(float), axis=-1) * 0.25 - 1.0
+        F[:, 0, 1] = F[:, 0, 0]
+        U = np.concatenate([U, F])
+    if U.shape[0] == 0:
+        return
+    C = _compact_union(U)
+    assert _covered(C, U).all() and _covered(U, C).all()
+    assert (C[..., 0] <= C[..., 1]).all()
+    assert C.shape[0] <= U.shape[0]
+    n_flat = int((U[..., 1] <= U[..., 0]).any(axis=1).sum())
+    assert int((C[..., 1] <= C[..., 0]).any(axis=1).sum()) == n_flat
+
+
+def test_compacting_tall_thin_boxes_keeps_them():
+    """64 boxes spanning every row of the grid, side by side with gaps: runs along the last
+    coordinate would be 64 per row; the boxes are kept as they are."""
+    from casadi_cmpc.sets._boxunion import _compact_union
+
+    lo = np.arange(64) * 2.0
+    U = np.stack([np.stack([np.zeros(64), np.full(64, 10.0)], -1),
+                  np.stack([lo, lo + 1.0], -1)], axis=1)
+    U = np.concatenate([U, np.array([[[0.0, 5.0], [0.0, 0.5]]])])  # one more edge per axis
+    C = _compact_union(U)
+    assert C.shape[0] <= U.shape[0]
+    assert _covered(C, U).all() and _covered(U, C).all()
