@@ -512,10 +512,12 @@ class InclusionFunction:
     evaluated :attr:`native_after` batches (its compilation starts in the background after
     :attr:`native_prefetch` batches, and the switch waits for it: the batch at which the
     backend changes does not depend on timings); ``"numpy"``, ``"scalar"`` and ``"native"``
-    force one (an empty batch always goes to numpy). Once a function is on its native kernel,
-    a small batch goes there too when it holds at least :attr:`native_small_work` box
-    instructions (boxes × instructions: the scalar code would then take longer than the
-    kernel's call). The centered form's scalar evaluation runs
+    force one (an empty batch always goes to numpy). Small batches count toward the move only
+    for a function of :attr:`native_large` instructions or more (a compilation pays for
+    itself only after thousands of small calls of a small function); once a function is on
+    its native kernel, a small batch goes there too when it holds at least
+    :attr:`native_small_work` box instructions (boxes × instructions: the scalar code would
+    then take longer than the kernel's call). The centered form's scalar evaluation runs
     its Jacobian graph on floats and combines the mean-value terms in Python exactly as
     :meth:`_centered_impl` does (its jump guard encloses the guard expressions with scalar code
     too). A Function with an operation the scalar evaluator lacks is evaluated with numpy
@@ -529,6 +531,7 @@ class InclusionFunction:
     scalar_max_batch_centered: int = 16
     native_after: int = 16
     native_prefetch: int = 4
+    native_large: int = 200
     native_small_work: int = 64
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
@@ -596,6 +599,7 @@ class InclusionFunction:
         self._native_batches = 0  # batches evaluated so far by numpy (auto: when to compile)
         self._n_instr = self.fun.n_instructions() + (
             self._g.n_instructions() if not self._is_natural else 0)
+        self._large = self._n_instr >= self.native_large  # small batches count toward native
 
     def __reduce__(self) -> tuple[Any, tuple[bytes]]:
         """Pickled as its CasADi graph and options; rebuilt once per process (the compiled
@@ -1163,10 +1167,15 @@ class InclusionFunction:
         backend is chosen as for a call (see the class Notes).
         """
         small = 0 < n <= self._scalar_limit()
-        # a small batch goes to the native kernel once its work is worth the call (about
-        # 8 µs; the scalar evaluator costs about 0.1 µs per box and instruction)
-        if n and (not small or n * self._n_instr >= self.native_small_work) \
-                and self._wants_native(n):
+        if small:
+            # to the native kernel: a large function after native_after batches (counted
+            # here too); another once it has moved there and the work is worth the kernel's
+            # call (about 8 µs; the scalar evaluator: about 0.1 µs per box and instruction)
+            go = self._wants_native(n) if self._large else (
+                n * self._n_instr >= self.native_small_work and self._native_ready())
+        else:
+            go = bool(n) and self._wants_native(n)
+        if go:
             if not self._is_natural:
                 return self._numpy(boxes, n)  # the centered form takes its native kernel
             run = self._native_kernel()

@@ -230,15 +230,14 @@ def test_fused_centered_kernel_with_a_jump_guard_uses_the_natural_enclosure_ther
 def test_a_large_function_called_box_by_box_moves_to_native():
     """A controller's check evaluates one box per call: for a large function (hundreds of
     instructions) the native kernel takes over after native_after calls; a small function
-    (fewer box instructions than native_small_work) stays on the scalar evaluator, cheaper
-    at that size."""
+    stays on the scalar evaluator, cheaper at that size (its small batches do not count)."""
     x = ca.SX.sym("x", 2)
     e = x
     for k in range(40):  # 40 steps of a nonlinear map: a few hundred instructions
         e = ca.vertcat(e[0] + 0.05 * e[1], e[1] + 0.05 * (ca.sin(e[0]) - 0.1 * e[1] + 0.01 * k))
     big = InclusionFunction(ca.Function("big", [x], [e]))
     small = InclusionFunction(ca.Function("small", [x], [ca.sin(x[0]) * x[1]]))
-    assert big._n_instr >= big.native_small_work > small._n_instr
+    assert big._large and not small._large
     box = np.array([[[0.1, 0.1 + 1e-9], [0.2, 0.2 + 1e-9]]])
     for _ in range(big.native_after + 1):
         a = big.evaluate_unchecked([box], 1)[0]
@@ -362,3 +361,43 @@ def test_native_equals_numpy_bit_for_bit_without_libm(ops, seed, tiny):
     a = InclusionFunction(f, backend="native")(X)[0]
     b = InclusionFunction(f, backend="numpy")(X)[0]
     assert np.array_equal(a, b, equal_nan=True), np.argwhere(a != b)[:3]
+
+
+def test_small_batches_follow_a_function_that_moved_to_native():
+    """A function of a few dozen instructions moves to its native kernel through large
+    batches (a search's levels); afterwards its small batches worth the kernel's call go
+    there too (the same enclosure as the kernel's), tiny ones stay scalar, and small
+    batches alone never move it."""
+    from casadi_cmpc.interval._native import native_available
+
+    if not native_available():
+        pytest.skip("no C compiler")
+    x = ca.SX.sym("x", 2)
+    e = ca.vertcat(x[0] * x[1] + ca.sin(x[0]), x[1] ** 2 - 0.3 * x[0] * x[1] + 1)
+    fun = ca.Function("mid", [x], [e])
+    rng = np.random.default_rng(5)
+    c = rng.random((400, 2))
+    big = np.stack([c, c + 0.01], -1)
+    few = big[:8]
+    only_small = InclusionFunction(fun)
+    for _ in range(3 * only_small.native_after):
+        only_small.evaluate_unchecked([few], 8)
+    assert only_small._native is None  # never compiled for small batches alone
+    F = InclusionFunction(fun)
+    assert 8 * F._n_instr >= F.native_small_work > F._n_instr
+    for _ in range(F.native_after + 1):
+        F.evaluate_unchecked([big], 400)
+    assert callable(F._native)
+    calls = []
+    run = F._native
+
+    def counted(boxes, n):
+        calls.append(n)
+        return run(boxes, n)
+
+    F._native = counted
+    got = F.evaluate_unchecked([few], 8)[0]
+    assert calls == [8]
+    assert np.array_equal(got, run([few], 8)[0])
+    F.evaluate_unchecked([few[:1]], 1)  # one box: below the work worth the call
+    assert calls == [8]
