@@ -704,14 +704,15 @@ class PairFrontier:
         inner = labels == INNER
         outer = labels == OUTER
         g_in = np.bincount(g, weights=inner, minlength=G) > 0
+        cnt = np.bincount(g, minlength=G)
         if self.shared is None:
-            cnt = np.bincount(g, minlength=G)
             g_out = (np.bincount(g, weights=outer, minlength=G) == cnt) & ~g_in
         else:  # a column at which every cell of the group is excluded
             E = np.asarray(self.data[self.shared], dtype=bool) | outer[:, None]
             miss = np.zeros((G, E.shape[1]), dtype=np.int64)
             np.add.at(miss, g, ~E)
             g_out = (miss == 0).any(axis=1) & ~g_in
+        g_out &= cnt > 0  # ids of groups absent from this frontier label nothing
         rep_in = _group_first(g, inner, G)[g_in]
         out[rep_in] = INNER
         out[_group_first(g, np.ones(N, dtype=bool), G)[g_out]] = OUTER

@@ -36,6 +36,21 @@ def test_reduce_group_inner_if_any_pair_inner_outside_only_if_all():
     assert kept.data["witness"][0, 0] == 1.0
 
 
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), k=st.integers(1, 12))
+def test_reduce_of_a_subset_of_groups_labels_as_the_whole(seed, k):
+    """A frontier holding only some groups (ids with gaps, as a part of a search holds):
+    every pair gets the label it gets in the frontier of all groups."""
+    rng = np.random.default_rng(seed)
+    groups = np.repeat(np.arange(k), rng.integers(1, 4, k))
+    labels = rng.choice([INNER, OUTER, UNDECIDED], size=groups.size).astype(np.int8)
+    full, _ = _frontier(groups).reduce(labels, eps=0.01)
+    keep = np.isin(groups, rng.choice(k, size=max(1, k // 2), replace=False))
+    part = _frontier(groups[keep])
+    got, _ = part.reduce(labels[keep], eps=0.01)
+    assert (got == full[keep]).all()
+
+
 def test_exhausted_group_becomes_one_boundary_pair():
     fr = _frontier([0, 0, 0])
     fr.lo[:, 1] = [0.0, 0.05, 0.5]
