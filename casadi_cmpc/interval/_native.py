@@ -482,6 +482,11 @@ def load_symbol(src: str, name: str, argtypes: Sequence[Any], wait: bool = True)
         fn = _loaded.get((key, name))
         failed = key in _failed
         building = _building.get(key)
+    if fn is not None and list(fn.argtypes) != list(argtypes):
+        # one loaded function object per symbol: a second signature would pass arguments
+        # the C code does not expect (a wrong pointer width: memory corruption)
+        raise TypeError(f"{name} is already loaded with the argument types {fn.argtypes}; "
+                        f"asked for {list(argtypes)}")
     if fn is None:
         if failed:
             return None

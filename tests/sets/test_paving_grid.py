@@ -43,20 +43,16 @@ def test_paving_uses_the_grid_for_large_unions_and_stays_exact():
 
 def _grid_c_loaded() -> bool:
     """Load the C grid query (waiting for its compilation); False without a compiler."""
-    import ctypes
-
-    from casadi_cmpc.interval._native import load_symbol
     from casadi_cmpc.sets import _boxunion as bu
 
-    i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    fn = load_symbol(bu._GRID_C, "cmpc_grid_query", [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr])
-    bu._grid_fn[:] = [fn]
-    return fn is not None
+    bu._grid_fn[:] = []
+    return bu._grid_kernel(wait=True) is not None
 
 
 @settings(max_examples=120, deadline=None)
 @given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 4), k=st.integers(1, 300),
-       scale=st.sampled_from([1.0, 1e-3, 37.0, 0.1]), shift=st.sampled_from([0.0, -5.0, 1e3]))
+       scale=st.sampled_from([1.0, 1e-3, 37.0, 0.1, 1e-300, 2.0 ** -1070, 1e150, 1e300]),
+       shift=st.sampled_from([0.0, -5.0, 1e3, 1e-310]))
 def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
     """The C loop and the numpy code answer every query alike: faces, flat unions, queries
     sticking out of the grid, infinite and NaN bounds (intersects: True; contains: False),
@@ -174,3 +170,20 @@ def test_compacting_tall_thin_boxes_keeps_them():
     C = _compact_union(U)
     assert C.shape[0] <= U.shape[0]
     assert _covered(C, U).all() and _covered(U, C).all()
+
+
+def test_a_symbol_loaded_with_another_signature_is_refused():
+    """One C function object per symbol: asking for it with other argument types (which
+    would pass arguments of the wrong width) is a TypeError, not memory corruption."""
+    import ctypes
+
+    import pytest
+
+    from casadi_cmpc.interval._native import load_symbol
+    from casadi_cmpc.sets import _boxunion as bu
+
+    if not _grid_c_loaded():
+        pytest.skip("no C compiler")
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    with pytest.raises(TypeError, match="already loaded"):
+        load_symbol(bu._GRID_C, "cmpc_grid_query", [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr])
