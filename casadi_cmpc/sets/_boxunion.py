@@ -554,14 +554,15 @@ class _BoxGrid:
         """Exact ``Q[i] ∩ union ≠ ∅`` (closed boxes) for query boxes ``Q`` (N, n, 2): (N,)
         bool; True for a query with an infinite bound."""
         got = self._native(Q, False)
-        if got is not None:
-            if self.flat.shape[0]:
-                ia, _ = _pairs(Q, self.flat)
-                got[ia] = True
-            return got
-        return self._intersects_numpy(Q)
+        if got is None:
+            got = self._intersects_numpy(Q)
+        if self.flat.shape[0]:  # the boxes without cells, pair by pair
+            ia, _ = _pairs(Q, self.flat)
+            got[ia] = True
+        return got
 
     def _intersects_numpy(self, Q: np.ndarray) -> np.ndarray:
+        """:meth:`intersects` against the cells of the grid (the flat boxes aside)."""
         n = Q.shape[1]
         fin = np.isfinite(Q).all(axis=(1, 2))
         meet = np.ones(Q.shape[0], dtype=bool)
@@ -581,9 +582,6 @@ class _BoxGrid:
             i0.append(a)
             i1.append(b)
         got = meet & (self._count(i0, i1) > 0)
-        if self.flat.shape[0]:
-            ia, _ = _pairs(Q, self.flat)
-            got[ia] = True
         return np.where(fin, got, True)
 
 

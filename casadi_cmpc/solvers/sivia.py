@@ -212,19 +212,16 @@ class _ComponentClassifier:
             idx = (mask & bit).nonzero()[0]
             if idx.size == 0:
                 continue
-            if img is not None:  # the enclosure of f_c itself, against its own bounds
-                ins, out = self._decide(img[idx, c, 0], img[idx, c, 1], self.joint[1][c],
-                                        idx.size)
-                outer[idx[out]] = True
-                sel = idx[ins]
-                mask[sel] = mask.take(sel) & clear
-                continue
-            if idx.size > 0.9 * N:  # nearly all open: evaluating all avoids the gathers
+            if img is None and idx.size > 0.9 * N:  # nearly all open: no gathers
                 ins, out = self._bounds(c, fr.lo, fr.hi)
                 outer |= out  # a proven element cannot be violated anywhere on its box
                 mask[ins] &= clear
             else:
-                ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
+                if img is not None:  # the enclosure of f_c itself, against its own bounds
+                    ins, out = self._decide(img[idx, c, 0], img[idx, c, 1],
+                                            self.joint[1][c], idx.size)
+                else:
+                    ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
                 outer[idx[out]] = True
                 sel = idx[ins]
                 mask[sel] = mask.take(sel) & clear
