@@ -97,6 +97,68 @@ class Thresholds:
         return cls(*(None if v is None else float(v) for v in (in_lo, out_lo, in_hi, out_hi)))
 
 
+# One pass over a level's joint image (N, k, 2): per box, every element's proof inside
+# (clearing its bit of the open mask) or outside, and the box's label. flags[c]: bit 0 a
+# lower bound, bit 1 an upper bound, bit 2 neither (inside = defined: no NaN bound and not
+# the whole line). Comparisons as in _ComponentClassifier._decide (NaN: no proof).
+_DECIDE_C = r"""
+#include <stdint.h>
+#include <math.h>
+void cmpc_sivia_decide(int64_t n, int64_t k, const double *img, const double *t,
+                       const unsigned char *flags, int64_t open, uint64_t *mask,
+                       signed char *labels)
+{
+    for (int64_t i = 0; i < n; ++i) {
+        const double *b = img + 2 * k * i;
+        uint64_t m = mask[i];
+        int out = 0;
+        for (int64_t c = 0; c < k; ++c) {
+            const double l = b[2 * c], h = b[2 * c + 1];
+            const double *tc = t + 4 * c;
+            const unsigned char f = flags[c];
+            int ins = 1;
+            if (f & 4) {
+                ins = !(isnan(l) || isnan(h) || (l == -INFINITY && h == INFINITY));
+            } else if (open) {
+                if (f & 1) { ins = ins && (l > tc[0]); out = out || (h <= tc[1]); }
+                if (f & 2) { ins = ins && (h < tc[2]); out = out || (l >= tc[3]); }
+            } else {
+                if (f & 1) { ins = ins && (l >= tc[0]); out = out || (h < tc[1]); }
+                if (f & 2) { ins = ins && (h <= tc[2]); out = out || (l > tc[3]); }
+            }
+            if (ins) m &= ~((uint64_t)1 << c);
+        }
+        mask[i] = m;
+        labels[i] = out ? -1 : (m == 0 ? 1 : 0);
+    }
+}
+"""
+_decide_fn: list[Any] = []  # the loaded C function (or None), once per process
+
+
+def _ptr(a: np.ndarray) -> int:
+    """The address of a C-contiguous array's data."""
+    return a.__array_interface__["data"][0]
+
+
+def _decide_kernel(wait: bool = False) -> Any:
+    """The C decision of a joint image, or None (no compiler, ``CMPC_NATIVE=0``, or, with
+    ``wait=False``, still compiling in the background: numpy decides meanwhile, with the
+    same answers)."""
+    if _decide_fn:
+        return _decide_fn[0]
+    import ctypes
+
+    from ..interval._native import load_symbol
+
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    fn = load_symbol(_DECIDE_C, "cmpc_sivia_decide", [i64, i64, ptr, ptr, ptr, i64, ptr, ptr],
+                     wait=wait)
+    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
+        _decide_fn.append(fn)
+    return fn or None
+
+
 def _defined(l: Any, h: Any) -> Any:
     """Where an output enclosure ``[l, h]`` proves the element defined at every point of its
     box: no NaN bound ("possibly undefined") and not the whole line (which is what a
@@ -118,8 +180,9 @@ class _ComponentClassifier:
     """
 
     #: levels of at least this many boxes are evaluated in one call of the function's
-    #: native kernel (every element at once) once the function has moved to it
-    JOINT_MIN = 256
+    #: native kernel (every element at once) once the function has moved to it: one call
+    #: of a few microseconds, against one numpy evaluation per open element
+    JOINT_MIN = 1
 
     def __init__(self, comps: list[tuple[Any, Thresholds]], open_target: bool,
                  step: int, joint: tuple[InclusionFunction, list[Thresholds]] | None = None
@@ -135,10 +198,27 @@ class _ComponentClassifier:
         if self.wide:
             self.dtype = np.dtype(bool)
             return
-        self.dtype = np.uint8 if k <= 8 else np.uint16 if k <= 16 else \
-            np.uint32 if k <= 32 else np.uint64
+        self.dtype = np.uint64  # (the layout of the C decision)
         self.bits = [(self.dtype(1 << c), ~self.dtype(1 << c)) for c in range(k)]
         self.all_open = self.dtype((1 << k) - 1) if k < 64 else self.dtype(2**64 - 1)
+        if joint is not None:
+            self._joint_thresholds(joint[1])
+
+    def _joint_thresholds(self, ts: list[Thresholds]) -> None:
+        """The thresholds of every element as (k,) arrays, for :meth:`_decide_all`."""
+        def arr(name: str) -> tuple[np.ndarray, np.ndarray]:
+            v = [getattr(t, name) for t in ts]
+            return (np.array([np.nan if x is None else x for x in v]),
+                    np.array([x is not None for x in v]))
+
+        (self.t_in_lo, self.has_lo), (self.t_out_lo, _) = arr("in_lo"), arr("out_lo")
+        (self.t_in_hi, self.has_hi), (self.t_out_hi, _) = arr("in_hi"), arr("out_hi")
+        self.free = np.flatnonzero(~(self.has_lo | self.has_hi))
+        self.bit_values = np.array([b for b, _ in self.bits], dtype=self.dtype)
+        self.t_all = np.ascontiguousarray(np.stack(
+            [self.t_in_lo, self.t_out_lo, self.t_in_hi, self.t_out_hi], axis=1))
+        self.flags = (self.has_lo.astype(np.uint8) | (self.has_hi.astype(np.uint8) << 1)
+                      | ((~(self.has_lo | self.has_hi)).astype(np.uint8) << 2))
 
     def _test(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[Any, Any]:
         """(inside, outside) proven for element ``c`` over the boxes ``lo``, ``hi`` (N, n)."""
@@ -183,6 +263,25 @@ class _ComponentClassifier:
             return None
         return run([np.stack([fr.lo, fr.hi], axis=-1)], N)[0]
 
+    def _decide_all(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_decide` for every element at once: ``(inside, outside)``, (N, k) booleans
+        from the enclosures ``img`` (N, k, 2) and the thresholds of the raw elements."""
+        l, h = img[:, :, 0], img[:, :, 1]
+        N, k = l.shape
+        if self.open_target:
+            ins_lo, out_lo = l > self.t_in_lo, h <= self.t_out_lo
+            ins_hi, out_hi = h < self.t_in_hi, l >= self.t_out_hi
+        else:
+            ins_lo, out_lo = l >= self.t_in_lo, h < self.t_out_lo
+            ins_hi, out_hi = h <= self.t_in_hi, l > self.t_out_hi
+        # a side without a bound proves nothing outside and does not stop a proof inside
+        # (its threshold is NaN: every comparison above is False there)
+        ins = (ins_lo | ~self.has_lo) & (ins_hi | ~self.has_hi)
+        out = out_lo | out_hi
+        if self.free.size:  # no finite bound: inside Y wherever the element is defined
+            ins[:, self.free] = _defined(l[:, self.free], h[:, self.free])
+        return ins, out
+
     def _bounds(self, c: int, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         N = lo.shape[0]
         if N <= self.step:
@@ -206,22 +305,37 @@ class _ComponentClassifier:
         mask = data.get("open")
         if mask is None or mask.shape != (N,) or mask.dtype != self.dtype:
             mask = np.full(N, self.all_open, dtype=self.dtype)
-        outer = np.zeros(N, dtype=bool)
         img = self._joint_image(fr)
+        if img is not None:
+            # every element at once; an element proven on the parent box is proven again
+            # (clearing its bit again), and no sound enclosure proves it outside
+            fn = _decide_kernel()
+            if fn is not None:
+                mask = np.ascontiguousarray(mask)
+                labels = np.empty(N, dtype=np.int8)
+                fn(N, self.k, _ptr(img), _ptr(self.t_all), _ptr(self.flags),
+                   int(self.open_target), _ptr(mask), _ptr(labels))
+                data["open"] = mask
+                fr.data = data
+                return labels
+            ins, out = self._decide_all(img)
+            mask &= ~(ins.view(np.uint8) * self.bit_values).sum(axis=1, dtype=self.dtype)
+            data["open"] = mask
+            fr.data = data
+            labels = (mask == 0).view(np.int8)
+            labels[out.any(axis=1)] = OUTER
+            return labels
+        outer = np.zeros(N, dtype=bool)
         for c, (bit, clear) in enumerate(self.bits):
             idx = (mask & bit).nonzero()[0]
             if idx.size == 0:
                 continue
-            if img is None and idx.size > 0.9 * N:  # nearly all open: no gathers
+            if idx.size > 0.9 * N:  # nearly all open: no gathers
                 ins, out = self._bounds(c, fr.lo, fr.hi)
                 outer |= out  # a proven element cannot be violated anywhere on its box
                 mask[ins] &= clear
             else:
-                if img is not None:  # the enclosure of f_c itself, against its own bounds
-                    ins, out = self._decide(img[idx, c, 0], img[idx, c, 1],
-                                            self.joint[1][c], idx.size)
-                else:
-                    ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
+                ins, out = self._bounds(c, fr.lo.take(idx, 0), fr.hi.take(idx, 0))
                 outer[idx[out]] = True
                 sel = idx[ins]
                 mask[sel] = mask.take(sel) & clear

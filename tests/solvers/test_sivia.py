@@ -712,3 +712,62 @@ def test_plot_draws_three_categories(routh_pavings):
     ax = routh_pavings[0.5].plot(show_outer=True)
     assert len(ax.collections) == 3
     plt.close(ax.figure)
+
+
+_EDGE = [0.0, -0.0, 1.0, -1.0, 2.5, -2.5, np.inf, -np.inf, np.nan, 5e-324, 1e308]
+
+
+@settings(max_examples=150, deadline=None)
+@given(k=st.integers(1, 6), N=st.integers(1, 40), open_target=st.booleans(),
+       seed=st.integers(0, 2 ** 32 - 1))
+def test_joint_decision_c_numpy_and_per_element_agree(k, N, open_target, seed):
+    """The decision of a level's joint image (every element against its bounds, the open
+    mask, the label) is the same by the C loop, by numpy and element by element, for
+    one- and two-sided and free elements, NaN and infinite enclosures and both kinds of
+    target."""
+    import importlib
+
+    mod = importlib.import_module("casadi_cmpc.solvers.sivia")
+
+    rng = np.random.default_rng(seed)
+    pick = lambda: float(rng.choice(_EDGE)) if rng.random() < 0.3 else float(  # noqa: E731
+        rng.integers(-3, 4))
+    ts = []
+    for _ in range(k):
+        lo = pick() if rng.random() < 0.6 else -np.inf
+        hi = pick() if rng.random() < 0.6 else np.inf
+        if np.isnan(lo) or np.isnan(hi):
+            lo, hi = -np.inf, np.inf
+        lo, hi = min(lo, hi), max(lo, hi)
+        ts.append(Thresholds.through(lo, hi, []))
+    cls = mod._ComponentClassifier([(None, t) for t in ts], open_target, 8192,
+                                   (None, ts))
+    img = np.array([[sorted([pick(), pick()]) for _ in range(k)] for _ in range(N)])
+    nan = rng.random((N, k, 2)) < 0.1
+    img[nan] = np.nan
+    mask = rng.integers(0, 2 ** k, N).astype(np.uint64)
+    # element by element
+    ref_mask = mask.copy()
+    ref_out = np.zeros(N, dtype=bool)
+    for c in range(k):
+        ins, out = cls._decide(img[:, c, 0], img[:, c, 1], ts[c], N)
+        ref_mask[np.asarray(ins)] &= ~np.uint64(1 << c)
+        ref_out |= np.asarray(out)
+    ref_labels = np.where(ref_out, OUTER, np.where(ref_mask == 0, INNER, 0)).astype(np.int8)
+    # numpy, all elements at once
+    with np.errstate(all="ignore"):
+        ins, out = cls._decide_all(img)
+    np_mask = mask & ~(ins.view(np.uint8) * cls.bit_values).sum(axis=1, dtype=np.uint64)
+    assert (np_mask == ref_mask).all()
+    assert (out.any(axis=1) == ref_out).all()
+    # the C loop
+    fn = mod._decide_kernel(wait=True)
+    if fn is None:
+        return  # no compiler (or still compiling): numpy decides
+    c_mask = mask.copy()
+    labels = np.empty(N, dtype=np.int8)
+    img = np.ascontiguousarray(img)
+    fn(N, k, mod._ptr(img), mod._ptr(cls.t_all), mod._ptr(cls.flags), int(open_target),
+       mod._ptr(c_mask), mod._ptr(labels))
+    assert (c_mask == ref_mask).all()
+    assert (labels == ref_labels).all()
