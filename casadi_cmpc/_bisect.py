@@ -19,9 +19,130 @@ It lives at the top of the package because every layer (``interval``, ``sets``,
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 __all__: list[str] = []
+
+# The same rules as one C loop over the boxes (compiled once and cached like the interval
+# kernels, :func:`casadi_cmpc.interval._native.load_symbol`): the widest coordinate of each
+# box, and the halves of each box. Every operation is the one numpy performs below (IEEE
+# double, no contraction), so both give the same bits; numpy answers where no compiler is
+# found and while the loop compiles.
+_BISECT_C = r"""
+#include <stdint.h>
+#include <math.h>
+void cmpc_widest(int64_t N, int64_t n, int64_t ld, const double *lo, const double *hi,
+                 const double *scale, double *best, int64_t *k)
+{
+    for (int64_t i = 0; i < N; ++i) {
+        const double *l = lo + i * ld, *h = hi + i * ld;
+        double b = h[0] - l[0];
+        if (scale) b = b / scale[0];
+        int64_t kk = 0;
+        for (int64_t j = 1; j < n; ++j) {
+            double w = h[j] - l[j];
+            if (scale) w = w / scale[j];
+            if (w > b) kk = j;
+            if (w > b || isnan(w)) b = w;  /* numpy.maximum: a NaN propagates */
+        }
+        best[i] = b;
+        k[i] = kk;
+    }
+}
+void cmpc_bisect(int64_t N, int64_t n, const double *lo, const double *hi, const int64_t *k,
+                 double r, int64_t mid, double *lo2, double *hi2, unsigned char *ok)
+{
+    for (int64_t i = 0; i < N; ++i) {
+        double *l1 = lo2 + i * n, *l2 = lo2 + (N + i) * n;
+        double *h1 = hi2 + i * n, *h2 = hi2 + (N + i) * n;
+        for (int64_t d = 0; d < n; ++d) {
+            l1[d] = l2[d] = lo[i * n + d];
+            h1[d] = h2[d] = hi[i * n + d];
+        }
+        const int64_t j = k[i];
+        const double a = lo[i * n + j], b = hi[i * n + j];
+        double c = mid ? 0.5 * a + 0.5 * b : a + r * (b - a);
+        int good = (a < c) && (c < b);
+        if (!good) {
+            c = (1.0 - r) * a + r * b;
+            good = (a < c) && (c < b);
+        }
+        if (!good) {
+            c = nextafter(a, INFINITY);
+            good = (a < c) && (c < b);
+        }
+        h1[j] = c;
+        l2[j] = c;
+        ok[i] = (unsigned char)good;
+    }
+}
+"""
+_kernels: dict[str, Any] = {}  # loaded C functions (None: unavailable for good)
+#: batches below this many boxes stay in numpy (the C call's fixed cost)
+NATIVE_MIN = 16
+#: the column loop of :func:`widest` (and its C twin) serves up to this many coordinates
+_COLUMN_MAX = 8
+
+
+def _kernel(name: str, wait: bool = False) -> Any:
+    """The C function ``name`` of :data:`_BISECT_C`, or None (no compiler, ``CMPC_NATIVE=0``,
+    or, with ``wait=False``, still compiling in the background)."""
+    fn = _kernels.get(name, False)
+    if fn is not False:
+        return fn
+    import ctypes
+
+    from .interval._native import load_symbol
+
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    args = {"cmpc_widest": [i64, i64, i64, ptr, ptr, ptr, ptr, ptr],
+            "cmpc_bisect": [i64, i64, ptr, ptr, ptr, ctypes.c_double, i64, ptr, ptr, ptr]}
+    fn = load_symbol(_BISECT_C, name, args[name], wait=wait)
+    if fn:
+        global _ptr
+        from .interval._native import address as _ptr
+    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
+        _kernels[name] = fn
+    return fn or None
+
+
+def _ptr(a: np.ndarray) -> int:
+    """The address of a C-contiguous array's data (:func:`~casadi_cmpc.interval._native.address`,
+    bound once a kernel is loaded)."""
+    raise RuntimeError("no C kernel loaded")
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return a if a.dtype == np.float64 and a.flags.c_contiguous else \
+        np.ascontiguousarray(a, dtype=np.float64)
+
+
+def widest_of(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None,
+              start: int = 0, stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`widest` of the widths ``hi - lo`` of the coordinates ``start:stop`` of boxes
+    ``lo``, ``hi`` (N, n), divided by ``scale`` (one entry per coordinate of the range) when
+    given: the same result (indices within the range), by one C loop when available."""
+    N, n_all = lo.shape
+    stop = n_all if stop is None else stop
+    n = stop - start
+    if N >= NATIVE_MIN and 0 < n <= _COLUMN_MAX:
+        fn = _kernel("cmpc_widest")
+        if fn is not None:
+            lo, hi = _f64(lo), _f64(hi)
+            sc = None if scale is None else _f64(np.broadcast_to(scale, (n,)))
+            best = np.empty(N)
+            k = np.empty(N, dtype=np.int64)
+            off = 8 * start
+            fn(N, n, n_all, _ptr(lo) + off, _ptr(hi) + off, None if sc is None else _ptr(sc),
+               _ptr(best), _ptr(k))
+            return best, k.view(np.intp)
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = hi[:, start:stop] - lo[:, start:stop]
+        if scale is not None:
+            w = w / scale
+    return widest(w)
 
 
 def widest(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -158,10 +279,20 @@ def bisect_widest(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray | None = No
     """
     N, n = lo.shape
     if k is None:
-        if widths is None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                widths = hi - lo
-        k = widest(widths)[1]
+        k = widest_of(lo, hi)[1] if widths is None else widest(widths)[1]
+    if N >= NATIVE_MIN and not (exact_mid and ratio == 0.5):
+        fn = _kernel("cmpc_bisect")
+        if fn is not None:
+            lo, hi = _f64(lo), _f64(hi)
+            kk = k if k.dtype == np.int64 and k.flags.c_contiguous else \
+                np.ascontiguousarray(k, dtype=np.int64)
+            lo2 = np.empty((2 * N, n))
+            hi2 = np.empty((2 * N, n))
+            ok = np.empty(N, dtype=bool)
+            r = float(ratio)
+            fn(N, n, _ptr(lo), _ptr(hi), _ptr(kk), r, int(r == 0.5), _ptr(lo2), _ptr(hi2),
+               _ptr(ok))
+            return lo2, hi2, k, ok
     flat = np.arange(N) * n + k  # position of the split bound in lo.ravel()
     a = lo.take(flat)
     b = hi.take(flat)

@@ -467,6 +467,15 @@ def native_kernel(fun: Any, widen: frozenset[int], out_pos: Sequence[np.ndarray]
                        wait=wait)
 
 
+def address(a: np.ndarray) -> int:
+    """The address of the data of a C-contiguous array, to pass to a loaded C function
+    (about four times cheaper than ``a.ctypes.data`` for a writable array)."""
+    try:
+        return ctypes.addressof(ctypes.c_char.from_buffer(a))
+    except (TypeError, ValueError, BufferError):  # read-only, empty or not contiguous
+        return a.__array_interface__["data"][0]
+
+
 def load_symbol(src: str, name: str, argtypes: Sequence[Any], wait: bool = True) -> Any:
     """The C function ``name`` (returning void, arguments ``argtypes`` of ctypes) of the
     source ``src``, loaded from the disk cache or compiled (the flags of every kernel);
@@ -539,8 +548,8 @@ def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
             st = strides[pattern] = (ctypes.c_long * max(n_in, 1))(
                 *[0 if one else w for one, w in zip(pattern, widths, strict=True)])
         outs = [np.zeros((n, d, 2)) for d in sizes]
-        pin = ptr_in(*[b.__array_interface__["data"][0] for b in ins])
-        pout = ptr_out(*[o.__array_interface__["data"][0] for o in outs])
+        pin = ptr_in(*[address(b) for b in ins])
+        pout = ptr_out(*[address(o) for o in outs])
         fn(n, pin, st, pout)
         return outs
 

@@ -470,10 +470,10 @@ class _BoxGrid:
             return None
         Q = np.ascontiguousarray(Q, dtype=np.float64)
         out = np.empty(Q.shape[0], dtype=np.int8)
-        fn(Q.shape[0], n, Q.ctypes.data, self._edges_cat.ctypes.data, self._off.ctypes.data,
-           self.table.ctypes.data, self._stride.ctypes.data, int(contains), out.ctypes.data,
-           self._glo.ctypes.data, self._ginv.ctypes.data, self._hints.ctypes.data,
-           self._hoff.ctypes.data)
+        from ..interval._native import address as a
+
+        fn(Q.shape[0], n, a(Q), a(self._edges_cat), a(self._off), a(self.table), a(self._stride),
+           int(contains), a(out), a(self._glo), a(self._ginv), a(self._hints), a(self._hoff))
         return out.view(bool)
 
     def polytope_inside(self, P: Any) -> bool:

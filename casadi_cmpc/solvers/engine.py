@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._bisect import bisect_widest, widest
+from .._bisect import bisect_widest, widest_of
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ._common import positive_eps
@@ -152,16 +152,9 @@ class BoxFrontier:
         return BoxFrontier(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), self.scale,
                            self.split_ratio)
 
-    def _widths(self) -> np.ndarray:
-        with np.errstate(over="ignore"):  # a huge box has an infinite width
-            w = self.hi - self.lo
-            if self.scale is not None:
-                w = w / self.scale
-        return w
-
     def width(self) -> np.ndarray:
         """Largest component width of each box (relative to ``scale`` when given), (N,)."""
-        w, self._split_dim = widest(self._widths())
+        w, self._split_dim = widest_of(self.lo, self.hi, self.scale)
         return w
 
     def split(self) -> tuple[BoxFrontier, BoxFrontier]:
@@ -169,7 +162,7 @@ class BoxFrontier:
         whose widest component holds no float strictly between its bounds (not split)."""
         k = self._split_dim
         if k is None or len(k) != len(self):
-            k = widest(self._widths())[1]
+            k = widest_of(self.lo, self.hi, self.scale)[1]
         new_lo, new_hi, _, ok = bisect_widest(self.lo, self.hi, k=k, ratio=self.split_ratio)
         data = self.data
         if ok.all():
@@ -675,22 +668,14 @@ class PairFrontier:
 
     take_done = take  # proven pairs keep their data (the proving control)
 
-    def _x_widths(self) -> np.ndarray:
-        with np.errstate(over="ignore"):
-            return (self.hi[:, : self.n] - self.lo[:, : self.n]) / self.x_scale
-
-    def _u_widths(self) -> np.ndarray:
-        with np.errstate(over="ignore"):
-            return (self.hi[:, self.n:] - self.lo[:, self.n:]) / self.u_scale
-
     def width(self) -> np.ndarray:
         """Largest relative width of each state box, (N,)."""
-        return widest(self._x_widths())[0]
+        return widest_of(self.lo, self.hi, self.x_scale, 0, self.n)[0]
 
     def _u_splittable(self) -> np.ndarray:
         if self.m == 0:
             return np.zeros(len(self), dtype=bool)
-        return widest(self._u_widths())[0] > self.u_eps
+        return widest_of(self.lo, self.hi, self.u_scale, self.n)[0] > self.u_eps
 
     def reduce(self, labels: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
         """Group labels from pair labels (see the class notes): ``(labels, small)``."""
@@ -754,7 +739,7 @@ class PairFrontier:
             keep = P.take(~can)
             S = P if can.all() else P.take(can)
             if len(S):
-                lo2, hi2, ok = S._halves(widest(S._u_widths())[1] + n, 0.5)
+                lo2, hi2, ok = S._halves(widest_of(S.lo, S.hi, S.u_scale, n)[1] + n, 0.5)
                 if not ok.all():
                     keep = PairFrontier._join([keep, S.take(~ok)])
                     S = S.take(ok)
@@ -783,7 +768,8 @@ class PairFrontier:
                 data = dict(data or {})
                 data.update({key: np.repeat(v, G, axis=0) for key, v in self.restart.items()})
             H = self._with(lo, hi, ug, data)
-            lo2, hi2, ok = H._halves(widest(H._x_widths())[1], self.split_ratio)
+            lo2, hi2, ok = H._halves(widest_of(H.lo, H.hi, H.x_scale, 0, n)[1],
+                                     self.split_ratio)
             if not ok.all():
                 stuck = H.take(~ok)
                 H = H.take(ok)

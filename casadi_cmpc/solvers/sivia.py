@@ -12,6 +12,7 @@ from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
 from ..interval._derivative import ParamFunction
+from ..interval._native import address as _address
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.base import SetBase
@@ -108,29 +109,37 @@ void cmpc_sivia_decide(int64_t n, int64_t k, const double *img, const double *t,
                        const unsigned char *flags, int64_t open, uint64_t *mask,
                        signed char *labels)
 {
-    for (int64_t i = 0; i < n; ++i) {
-        const double *b = img + 2 * k * i;
-        uint64_t m = mask[i];
-        int out = 0;
-        for (int64_t c = 0; c < k; ++c) {
-            const double l = b[2 * c], h = b[2 * c + 1];
-            const double *tc = t + 4 * c;
-            const unsigned char f = flags[c];
-            int ins = 1;
-            if (f & 4) {
-                ins = !(isnan(l) || isnan(h) || (l == -INFINITY && h == INFINITY));
-            } else if (open) {
-                if (f & 1) { ins = ins && (l > tc[0]); out = out || (h <= tc[1]); }
-                if (f & 2) { ins = ins && (h < tc[2]); out = out || (l >= tc[3]); }
-            } else {
-                if (f & 1) { ins = ins && (l >= tc[0]); out = out || (h < tc[1]); }
-                if (f & 2) { ins = ins && (h <= tc[2]); out = out || (l > tc[3]); }
+    int64_t i, c;
+    for (i = 0; i < n; ++i) labels[i] = 0;  /* first: 1 where an element is proven outside */
+    for (c = 0; c < k; ++c) {  /* element by element: loops over the boxes without branches */
+        const double *b = img + 2 * c;
+        const double t0 = t[4 * c], t1 = t[4 * c + 1], t2 = t[4 * c + 2], t3 = t[4 * c + 3];
+        const int f = flags[c], has_lo = f & 1, has_hi = (f >> 1) & 1;
+        const uint64_t bit = (uint64_t)1 << c;
+        if (f & 4) {
+            for (i = 0; i < n; ++i) {
+                const double l = b[2 * k * i], h = b[2 * k * i + 1];
+                const int ins = !(isnan(l) | isnan(h) | ((l == -INFINITY) & (h == INFINITY)));
+                mask[i] &= ~(ins ? bit : 0);
             }
-            if (ins) m &= ~((uint64_t)1 << c);
+        } else if (open) {
+            for (i = 0; i < n; ++i) {
+                const double l = b[2 * k * i], h = b[2 * k * i + 1];
+                const int ins = (!has_lo | (l > t0)) & (!has_hi | (h < t2));
+                labels[i] |= (has_lo & (h <= t1)) | (has_hi & (l >= t3));
+                mask[i] &= ~(ins ? bit : 0);
+            }
+        } else {
+            for (i = 0; i < n; ++i) {
+                const double l = b[2 * k * i], h = b[2 * k * i + 1];
+                const int ins = (!has_lo | (l >= t0)) & (!has_hi | (h <= t2));
+                labels[i] |= (has_lo & (h < t1)) | (has_hi & (l > t3));
+                mask[i] &= ~(ins ? bit : 0);
+            }
         }
-        mask[i] = m;
-        labels[i] = out ? -1 : (m == 0 ? 1 : 0);
     }
+    for (i = 0; i < n; ++i)
+        labels[i] = (signed char)(labels[i] ? -1 : (mask[i] == 0));
 }
 """
 _decide_fn: list[Any] = []  # the loaded C function (or None), once per process
@@ -138,7 +147,7 @@ _decide_fn: list[Any] = []  # the loaded C function (or None), once per process
 
 def _ptr(a: np.ndarray) -> int:
     """The address of a C-contiguous array's data."""
-    return a.__array_interface__["data"][0]
+    return _address(a)
 
 
 def _decide_kernel(wait: bool = False) -> Any:

@@ -401,3 +401,15 @@ def test_small_batches_follow_a_function_that_moved_to_native():
     assert np.array_equal(got, run([few], 8)[0])
     F.evaluate_unchecked([few[:1]], 1)  # one box: below the work worth the call
     assert calls == [8]
+
+
+def test_address_is_the_data_pointer_of_every_kind_of_array():
+    """The cheap address of an array's data is its data pointer, also for read-only,
+    empty and broadcast arrays (which take the slower path)."""
+    from casadi_cmpc.interval._native import address
+
+    a = np.arange(12.0).reshape(3, 4)
+    ro = a.copy()
+    ro.flags.writeable = False
+    for x in (a, a[1:], ro, np.empty(0), np.broadcast_to(np.ones(3), (3,)), np.zeros(5, bool)):
+        assert address(x) == x.ctypes.data
