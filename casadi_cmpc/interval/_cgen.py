@@ -19,7 +19,11 @@ Rounding rules (those of :mod:`casadi_cmpc.interval.arith`):
   negative one).
 * libm functions (exp, log, sin, ...): a margin of ``2**-44`` relative (256 ulps) plus
   ``2**-1060`` absolute, then one ulp; results are intersected with the range of the
-  function. ``sin``/``cos``: the values at the ends, and ``1`` (``-1``) where the box
+  function. ``exp``, ``sin`` and ``cos`` are computed here, without libm, in straight-line
+  arithmetic that a compiler runs in SIMD lanes: ``exp`` within ``2**-48`` relative;
+  ``sin``/``cos`` after a reduction by ``k pi/2`` in five exact pieces, within ``2**-47``
+  relative plus ``|k| 2**-141``, with the margin plus ``|k| 2**-135`` (both in every
+  rounding mode). ``sin``/``cos``: the values at the ends, and ``1`` (``-1``) where the box
   (conservatively) holds a maximum (minimum), ``[-1, 1]`` for a box of width ``2 pi`` or
   beyond ``|t| = 1e8``; ``tan``: increasing between poles, possibly undefined where a pole
   may lie in the box (the rules of the Python backend).
@@ -498,27 +502,99 @@ CIV_INLINE int civ_contains_point(double lo, double hi, double off, double perio
     return floor(kh + slack) >= ceil(kl - slack);
 }
 
+/* pi/2 in five pieces of at most 26 significant bits (k P_i is exact for |k| < 2^27; the
+ * pieces sum to pi/2 within 2^-141) */
+#define CIV_PIO2_1 0x1.921fb58p+0
+#define CIV_PIO2_2 -0x1.dde974p-27
+#define CIV_PIO2_3 0x1.1a6263p-54
+#define CIV_PIO2_4 0x1.8a2e038p-81
+#define CIV_PIO2_5 -0x1.f1976b8p-110
+#define CIV_PIO4 0x1.921fb54442d18p-1 /* below pi / 4 */
+
+/* x - k pi/2 for an integer k, |k| < 2^27, with |x - k pi/2| <= 0.79: every product is
+ * exact. Each difference s_i = s_(i-1) - k P_i is exact by Sterbenz's lemma when its
+ * operands are within a factor 2 of each other; otherwise |s_i| exceeds |k P_i| / 2, so
+ * |r| >= |k| 2^-28 (i = 2) resp. |k| 2^-55 ... and the tail k (P_(i+1) + ...) is below
+ * 2^-25 |r|: the rounding error (one ulp in any rounding mode) is at most 2^-51 |r|.
+ * Hence the result is within 2^-49 |r| + |k| 2^-141 (the pieces' error) of the exact
+ * r = x - k pi/2, in every rounding mode. */
+CIV_INLINE double civ_rem_pio2(double x, double k) {
+    return ((((x - k * CIV_PIO2_1) - k * CIV_PIO2_2) - k * CIV_PIO2_3) - k * CIV_PIO2_4)
+        - k * CIV_PIO2_5;
+}
+
+/* sin x (cosine = 0) or cos x (cosine = 1) for |x| <= 1e8, in straight-line arithmetic (no
+ * table, no branch, no libm call: SIMD lanes). x = k pi/2 + r with an integer k: the shift
+ * gives k within one of x 2/pi in any rounding mode, and one correction brings |r| to at
+ * most pi/4 (plus the reduction error); sin r by its Taylor polynomial to r^17 (remainder
+ * below 2^-63 |r| for |r| <= 0.786), cos r to r^18 (below 2^-68), chosen and signed by
+ * k + cosine mod 4. Within 2^-47 relative plus |k| 2^-141 of the exact value in every
+ * rounding mode (|sin r| >= 0.9 |r| and cos r >= 0.7 there, so the error of r is relative);
+ * the callers add 2^-44 relative plus |k| 2^-135 (|k| is returned in *kabs). */
+CIV_INLINE double civ_sincos_core(double x, int cosine, double *kabs) {
+    double t = x * 0x1.45f306dc9c883p-1 + 0x1.8p52, k = t - 0x1.8p52;
+    double r = civ_rem_pio2(x, k), z, sn, cs, q;
+    k = k + (r > CIV_PIO4 ? 1.0 : 0.0) - (r < -CIV_PIO4 ? 1.0 : 0.0);
+    r = civ_rem_pio2(x, k);
+    z = r * r;
+    sn = 0x1.952c77030ad4ap-49;                    /* 1 / 17! */
+    sn = sn * z - 0x1.ae7f3e733b81fp-41;           /* 1 / 15! */
+    sn = sn * z + 0x1.6124613a86d09p-33;           /* 1 / 13! */
+    sn = sn * z - 0x1.ae64567f544e4p-26;           /* 1 / 11! */
+    sn = sn * z + 0x1.71de3a556c734p-19;           /* 1 / 9! */
+    sn = sn * z - 0x1.a01a01a01a01ap-13;           /* 1 / 7! */
+    sn = sn * z + 0x1.1111111111111p-7;            /* 1 / 5! */
+    sn = sn * z - 0x1.5555555555555p-3;            /* 1 / 3! */
+    sn = r + (r * z) * sn;
+    cs = 0x1.6827863b97d97p-53;                    /* 1 / 18! */
+    cs = cs * z - 0x1.ae7f3e733b81fp-45;           /* 1 / 16! */
+    cs = cs * z + 0x1.93974a8c07c9dp-37;           /* 1 / 14! */
+    cs = cs * z - 0x1.1eed8eff8d898p-29;           /* 1 / 12! */
+    cs = cs * z + 0x1.27e4fb7789f5cp-22;           /* 1 / 10! */
+    cs = cs * z - 0x1.a01a01a01a01ap-16;           /* 1 / 8! */
+    cs = cs * z + 0x1.6c16c16c16c17p-10;           /* 1 / 6! */
+    cs = cs * z - 0x1.5555555555555p-5;            /* 1 / 4! */
+    cs = 1.0 + z * (-0.5 - z * cs);
+    q = k + (cosine ? 1.0 : 0.0);
+    q = q - 4.0 * floor(q * 0.25);                 /* exact: 0, 1, 2 or 3 */
+    *kabs = fabs(k);
+    return q == 0.0 ? sn : (q == 1.0 ? cs : (q == 2.0 ? -sn : -cs));
+}
+
+/* a bound of sin or cos from the core: the libm margin plus |k| 2^-135 */
+CIV_INLINE double civ_dnt(double v, double kabs) {
+    return civ_dn(v - (fabs(v) * CIV_RL + (kabs * 0x1p-135 + CIV_AL)));
+}
+
+CIV_INLINE double civ_upt(double v, double kabs) {
+    return civ_up(v + (fabs(v) * CIV_RL + (kabs * 0x1p-135 + CIV_AL)));
+}
+
 /* sin, cos: f at the ends, and 1 (-1) where the box holds a maximum (minimum) of f; the
- * whole [-1, 1] for a box of width 2 pi or more or beyond |t| = 1e8 */
-CIV_INLINE civ civ_sincos(civ a, double (*f)(double), double max_off, double min_off) {
-    double fl, fh, lo, hi, two_pi = 2.0 * CIV_PI_LO;
-    if (civ_isnan(a)) return a;
-    if (!(a.hi - a.lo < two_pi && fabs(a.lo) <= CIV_SIN_SAFE && fabs(a.hi) <= CIV_SIN_SAFE))
-        return civ_make(-1.0, 1.0);
-    fl = f(a.lo);
-    fh = f(a.hi);
-    if (fl != fl || fh != fh) return civ_make(-1.0, 1.0);
-    lo = civ_max(civ_dnf(civ_min(fl, fh)), -1.0);
-    hi = civ_min(civ_upf(civ_max(fl, fh)), 1.0);
-    if (civ_contains_point(a.lo, a.hi, max_off, two_pi)) hi = 1.0;
-    if (civ_contains_point(a.lo, a.hi, min_off, two_pi)) lo = -1.0;
+ * whole [-1, 1] for a box of width 2 pi or more or beyond |t| = 1e8. Without branches. */
+CIV_INLINE civ civ_sincos(civ a, int cosine, double max_off, double min_off) {
+    double two_pi = 2.0 * CIV_PI_LO, kl, kh, fl, fh, ka, lo, hi;
+    int whole = !(a.hi - a.lo < two_pi && fabs(a.lo) <= CIV_SIN_SAFE
+                  && fabs(a.hi) <= CIV_SIN_SAFE);
+    double xl = whole ? 0.0 : a.lo, xh = whole ? 0.0 : a.hi;
+    fl = civ_sincos_core(xl, cosine, &kl);
+    fh = civ_sincos_core(xh, cosine, &kh);
+    ka = kl > kh ? kl : kh;
+    lo = civ_max(civ_dnt(civ_min(fl, fh), ka), -1.0);
+    hi = civ_min(civ_upt(civ_max(fl, fh), ka), 1.0);
+    hi = civ_contains_point(xl, xh, max_off, two_pi) ? 1.0 : hi;
+    lo = civ_contains_point(xl, xh, min_off, two_pi) ? -1.0 : lo;
+    lo = whole ? -1.0 : lo;
+    hi = whole ? 1.0 : hi;
+    lo = civ_isnan(a) ? NAN : lo;
+    hi = civ_isnan(a) ? NAN : hi;
     return civ_make(lo, hi);
 }
 
 CIV_INLINE civ civ_sin(civ a) {
-    return civ_sincos(a, sin, 0.5 * CIV_PI_LO, -0.5 * CIV_PI_LO);
+    return civ_sincos(a, 0, 0.5 * CIV_PI_LO, -0.5 * CIV_PI_LO);
 }
-CIV_INLINE civ civ_cos(civ a) { return civ_sincos(a, cos, 0.0, CIV_PI_LO); }
+CIV_INLINE civ civ_cos(civ a) { return civ_sincos(a, 1, 0.0, CIV_PI_LO); }
 
 /* tan: increasing between its poles; possibly undefined where the box may hold a pole */
 CIV_INLINE civ civ_tan(civ a) {

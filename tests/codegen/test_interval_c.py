@@ -244,3 +244,55 @@ def test_exp_polynomial_encloses_in_every_rounding_mode(tmp_path, mode):
     assert np.isnan(lo[0]) and np.isnan(hi[0])
     lo, hi = call(lib, np.array([-np.inf]), np.array([np.inf]), 1)
     assert lo[0] == 0.0 and hi[0] == np.inf
+
+
+@pytest.mark.parametrize("mode", ["nearest", "upward", "downward", "toward_zero"])
+def test_sin_cos_polynomial_encloses_in_every_rounding_mode(tmp_path, mode):
+    """The C sin and cos (reduction by pi/2 in five exact pieces, Taylor polynomials, no
+    libm) enclose the exact values at 60 digits in every FPU rounding mode: at the doubles
+    nearest to k pi/2 and their neighbours (where the reduction cancels) up to the limit
+    |x| = 1e8, at random points of every magnitude, on wide boxes holding extrema, and they
+    stay within 2^-40 relative where the value is not tiny."""
+    import ctypes.util
+
+    libm = ctypes.CDLL(ctypes.util.find_library("m"))
+    codes = {"nearest": 0, "downward": 0x400, "upward": 0x800, "toward_zero": 0xC00}
+    if libm.fegetround() != 0:
+        pytest.skip("fesetround not available as expected")
+    v = ca.SX.sym("v", 1)
+    lib = compile_interval(ca.Function("sc", [v], [ca.vertcat(ca.sin(v), ca.cos(v))]),
+                           tmp_path)
+    rng = np.random.default_rng(5)
+    mpmath.mp.prec = 200
+    ks = np.concatenate([np.arange(1, 200), rng.integers(1, 63_000_000, 200)])
+    near = np.array([float(mpmath.mpf(int(k)) * mpmath.pi / 2) for k in ks])
+    near = np.concatenate([near, -near])
+    xs = np.concatenate([near, np.nextafter(near, np.inf), np.nextafter(near, -np.inf),
+                         [0.0, -0.0, 5e-324, -5e-324, 1e-300, 0.7853981633974483,
+                          0.7853981633974484, 1e8, -1e8, 99999999.99999999],
+                         rng.uniform(-10, 10, 300), rng.uniform(-1e8, 1e8, 300),
+                         10.0 ** rng.uniform(-300, 8, 300) * rng.choice([-1, 1], 300)])
+    a = rng.uniform(-30, 30, 200)
+    b = a + 10.0 ** rng.uniform(-6, 0.8, 200)  # (in the default rounding mode)
+    assert libm.fesetround(ctypes.c_int(codes[mode])) == 0
+    try:
+        res = [call(lib, np.array([x]), np.array([x]), 2) for x in xs]
+        wide = [call(lib, np.array([x]), np.array([y]), 2) for x, y in zip(a, b)]
+    finally:
+        libm.fesetround(ctypes.c_int(0))
+    for x, (lo, hi) in zip(xs, res, strict=True):
+        xm = mpmath.mpf(float(x))
+        for j, e in enumerate((mpmath.sin(xm), mpmath.cos(xm))):
+            assert mpmath.mpf(float(lo[j])) <= e <= mpmath.mpf(float(hi[j])), \
+                (mode, float(x).hex(), j, lo[j], hi[j])
+            if abs(e) > 1e-290:
+                assert hi[j] - lo[j] <= 2.0 ** -40 * float(abs(e)), (mode, x, j, lo, hi)
+    for x, y, (lo, hi) in zip(a, b, wide, strict=True):
+        for t in np.clip(np.linspace(x, y, 9), x, y):
+            tm = mpmath.mpf(float(t))
+            for j, e in enumerate((mpmath.sin(tm), mpmath.cos(tm))):
+                assert mpmath.mpf(float(lo[j])) <= e <= mpmath.mpf(float(hi[j])), (mode, x, y)
+    lo, hi = call(lib, np.array([np.nan]), np.array([np.nan]), 2)
+    assert np.isnan(lo).all() and np.isnan(hi).all()
+    lo, hi = call(lib, np.array([1e8]), np.array([1.5e8]), 2)  # beyond the limit: [-1, 1]
+    assert (lo == -1.0).all() and (hi == 1.0).all()
