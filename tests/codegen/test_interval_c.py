@@ -277,7 +277,7 @@ def test_sin_cos_polynomial_encloses_in_every_rounding_mode(tmp_path, mode):
     assert libm.fesetround(ctypes.c_int(codes[mode])) == 0
     try:
         res = [call(lib, np.array([x]), np.array([x]), 2) for x in xs]
-        wide = [call(lib, np.array([x]), np.array([y]), 2) for x, y in zip(a, b)]
+        wide = [call(lib, np.array([x]), np.array([y]), 2) for x, y in zip(a, b, strict=True)]
     finally:
         libm.fesetround(ctypes.c_int(0))
     for x, (lo, hi) in zip(xs, res, strict=True):
