@@ -79,33 +79,34 @@ void cmpc_bisect(int64_t N, int64_t n, const double *lo, const double *hi, const
     }
 }
 """
-_kernels: dict[str, Any] = {}  # loaded C functions (None: unavailable for good)
 #: batches below this many boxes stay in numpy (the C call's fixed cost)
 NATIVE_MIN = 16
 #: the column loop of :func:`widest` (and its C twin) serves up to this many coordinates
 _COLUMN_MAX = 8
 
 
+_loaded: dict[str, Any] = {}  # the C functions once loaded
+
+
 def _kernel(name: str, wait: bool = False) -> Any:
     """The C function ``name`` of :data:`_BISECT_C`, or None (no compiler, ``CMPC_NATIVE=0``,
     or, with ``wait=False``, still compiling in the background)."""
-    fn = _kernels.get(name, False)
-    if fn is not False:
+    fn = _loaded.get(name)
+    if fn is not None:
         return fn
     import ctypes
 
-    from .interval._native import load_symbol
+    from .interval._native import c_function
 
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
     args = {"cmpc_widest": [i64, i64, i64, ptr, ptr, ptr, ptr, ptr],
             "cmpc_bisect": [i64, i64, ptr, ptr, ptr, ctypes.c_double, i64, ptr, ptr, ptr]}
-    fn = load_symbol(_BISECT_C, name, args[name], wait=wait)
-    if fn:
+    fn = c_function(_BISECT_C, name, args[name], wait)
+    if fn is not None:
         global _ptr
         from .interval._native import address as _ptr
-    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
-        _kernels[name] = fn
-    return fn or None
+        _loaded[name] = fn
+    return fn
 
 
 def _ptr(a: np.ndarray) -> int:
@@ -131,7 +132,8 @@ def widest_of(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None,
         fn = _kernel("cmpc_widest")
         if fn is not None:
             lo, hi = _f64(lo), _f64(hi)
-            sc = None if scale is None else _f64(np.broadcast_to(scale, (n,)))
+            sc = None if scale is None else _f64(
+                scale if np.shape(scale) == (n,) else np.broadcast_to(scale, (n,)))
             best = np.empty(N)
             k = np.empty(N, dtype=np.int64)
             off = 8 * start

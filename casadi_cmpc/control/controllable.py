@@ -92,12 +92,64 @@ def _rows_inclusion(model: Model, A: np.ndarray) -> Any:
     return F
 
 
+def _signed_rows(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of ``A x <= b`` (r, n) up to sign: ``(D, lower, upper)`` with
+    ``{A x <= b} = {lower <= D x <= upper}``.
+
+    A row equal to minus an earlier one (exactly) becomes a lower bound of that one,
+    ``-a x <= c  <=>  a x >= -c`` (negation is exact); repeated rows keep the tightest bound.
+    A box or any centrally symmetric polytope has half as many rows to enclose, and the
+    enclosure of ``-a f`` is the negation of that of ``a f``. Missing sides are infinite.
+    """
+    seen: dict[bytes, int] = {}
+    D: list[np.ndarray] = []
+    lower: list[float] = []
+    upper: list[float] = []
+    for a, c in zip(A, b, strict=True):
+        a = a + 0.0  # -0.0 -> 0.0: one key per direction
+        key, neg = a.tobytes(), (-a + 0.0).tobytes()
+        if key in seen:
+            upper[seen[key]] = min(upper[seen[key]], float(c))
+        elif neg in seen:
+            lower[seen[neg]] = max(lower[seen[neg]], -float(c))
+        else:
+            seen[key] = len(D)
+            D.append(a)
+            lower.append(-np.inf)
+            upper.append(float(c))
+    return (np.array(D).reshape(-1, A.shape[1]), np.array(lower, dtype=float),
+            np.array(upper, dtype=float))
+
+
+def _rows_hold(R: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """``lower <= [lo, hi] <= upper`` on every row: (N,) from the enclosures R (N, r, 2)."""
+    if R.shape[1] > 16:
+        return (R[..., 1] <= upper).all(axis=1) & (R[..., 0] >= lower).all(axis=1)
+    ok = np.ones(R.shape[0], dtype=bool)  # column by column: reductions along a short
+    for k in range(R.shape[1]):           # last axis are slow in numpy
+        ok &= R[:, k, 1] <= upper[k]
+        ok &= R[:, k, 0] >= lower[k]
+    return ok
+
+
+def _rows_fail(R: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Some row's enclosure lies beyond its bounds: (N,) from R (N, r, 2)."""
+    if R.shape[1] > 16:
+        return (R[..., 0] > upper).any(axis=1) | (R[..., 1] < lower).any(axis=1)
+    out = np.zeros(R.shape[0], dtype=bool)
+    for k in range(R.shape[1]):
+        out |= R[:, k, 0] > upper[k]
+        out |= R[:, k, 1] < lower[k]
+    return out
+
+
 class _Target:
     """Proven tests of ``f(X, U, W) ⊆ T`` and ``f(X, U, W) ∩ T = ∅`` for batches of boxes.
 
     Polytope members are tested through the rows composed with f, ``H f(x, u, w) <= h``,
-    enclosed by the centered form (H enters as exact constants, so nothing is rounded);
-    box unions and zonotopes through the interval hull of the successor.
+    enclosed by the centered form (H enters as exact constants, so nothing is rounded; a
+    row and its negation are enclosed once, see :func:`_signed_rows`); box unions and
+    zonotopes through the interval hull of the successor.
     """
 
     def __init__(self, model: Model, target: Any) -> None:
@@ -106,15 +158,17 @@ class _Target:
         for S in members:
             if S.dim != n:
                 raise DimensionError(f"the target has dimension {S.dim}; the model has n = {n}")
-        self.polys: list[tuple[Any, None, np.ndarray]] = []
+        # per polytope: the inclusion of its rows up to sign, and the bounds on each
+        self.polys: list[tuple[Any, np.ndarray, np.ndarray]] = []
         boxes = []
         self.zonos: list[Zonotope] = []
         for S in members:
             if isinstance(S, Polytope):
                 if S.is_empty():
                     continue
-                A, b = np.asarray(S.A, dtype=float), np.asarray(S.b, dtype=float)
-                self.polys.append((_rows_inclusion(model, A), None, b))
+                A, lower, upper = _signed_rows(np.asarray(S.A, dtype=float),
+                                               np.asarray(S.b, dtype=float))
+                self.polys.append((_rows_inclusion(model, A), lower, upper))
             elif isinstance(S, Paving):
                 if S.inner.shape[0]:
                     boxes.append(S.inner)
@@ -142,8 +196,8 @@ class _Target:
         ok = np.zeros(N, dtype=bool)
         if self.empty or N == 0:
             return ok
-        for (_, _, b), R in zip(self.polys, rows, strict=True):
-            ok |= (R[..., 1] <= b).all(axis=1)
+        for (_, lower, upper), R in zip(self.polys, rows, strict=True):
+            ok |= _rows_hold(R, lower, upper)
         if Y is not None:
             und = np.flatnonzero(~ok)
             if und.size:
@@ -163,8 +217,8 @@ class _Target:
         out = np.ones(N, dtype=bool)
         if self.empty:
             return out
-        for (_, _, b), R in zip(self.polys, rows, strict=True):
-            out &= (R[..., 0] > b).any(axis=1)
+        for (_, lower, upper), R in zip(self.polys, rows, strict=True):
+            out &= _rows_fail(R, lower, upper)
         if Y is not None and out.any():
             idx = np.flatnonzero(out)
             Yi = Y[idx]
@@ -241,9 +295,9 @@ class _OneStepClassifier:
         for ob in self.obstacles:
             blocked |= np.asarray(ob.intersects_box(X), dtype=bool)
             buried |= np.asarray(ob.contains_box(X), dtype=bool)
-        # one evaluation of the target's test functions for the whole batch: the pairs
-        # with each point w_c of W (exclusion) and the boxes with the cell midpoint over
-        # all of W (inclusion)
+        # the target's test functions on the pairs with each point w_c of W (exclusion),
+        # then on the boxes of the cells that may still be useful with the cell midpoint
+        # over all of W (inclusion)
         T = self.target
         und = np.flatnonzero(~buried)
         cand = np.flatnonzero(~buried & ~blocked)
@@ -252,25 +306,23 @@ class _OneStepClassifier:
             return labels
         wp = self.w_points
         nc, K = wp.shape[0], und.size
-        lo, hi = C[cand, :, 0], C[cand, :, 1]
-        mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-        Xs = np.concatenate([np.tile(X[und], (nc, 1, 1)), X[cand]])
-        Us = np.concatenate([np.tile(C[und], (nc, 1, 1)), np.stack([mid, mid], axis=-1)])
-        Wp = np.repeat(np.stack([wp, wp], axis=-1), K, axis=0)  # (nc K, l, 2)
-        Ws = np.concatenate([Wp, np.broadcast_to(self.W, (cand.size,) + self.W.shape[1:])])
-        rows, Y = T.images(Xs, Us, Ws)
-        m = nc * K
-        out = T.outside_of([R[:m] for R in rows], None if Y is None else Y[:m])
+        Xu, Cu = (X, C) if K == N else (X[und], C[und])
+        if nc == 1:
+            Xs, Us, Ws = Xu, Cu, np.stack([wp, wp], axis=-1)  # (1, l, 2): broadcast
+        else:
+            Xs, Us = np.tile(Xu, (nc, 1, 1)), np.tile(Cu, (nc, 1, 1))
+            Ws = np.repeat(np.stack([wp, wp], axis=-1), K, axis=0)  # (nc K, l, 2)
+        out = T.outside_of(*T.images(Xs, Us, Ws))
         useless = buried.copy()
         useless[und] = out.reshape(nc, K).any(axis=0)
         labels[useless] = OUTER
-        keep = ~useless[cand]
-        cand = cand[keep]
+        cand = cand[~useless[cand]]
         if cand.size:
-            ok = T.inside_of([R[m:][keep] for R in rows],
-                             None if Y is None else Y[m:][keep])
+            lo, hi = C[cand, :, 0], C[cand, :, 1]
+            mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
+            ok = T.inside_of(*T.images(X[cand], np.stack([mid, mid], axis=-1), self.W))
             labels[cand[ok]] = INNER
-            fr.data["witness"][cand[ok]] = mid[keep][ok]
+            fr.data["witness"][cand[ok]] = mid[ok]
         return labels
 
 

@@ -349,6 +349,22 @@ CIV_INLINE civ civ_mulc(civ a, double c) {
     return c > 0.0 ? p : (c < 0.0 ? n : z);
 }
 
+/* a 0: exactly 0, NaN where a is NaN (possibly undefined) */
+CIV_INLINE civ civ_zero_of(civ a) {
+    civ r;
+    r.lo = a.lo != a.lo ? NAN : 0.0;
+    r.hi = a.hi != a.hi ? NAN : 0.0;
+    return r;
+}
+
+/* a, or NaN where z is NaN: a + z and a - z for z = 0 (or NaN), exactly */
+CIV_INLINE civ civ_nan_of(civ a, civ z) {
+    civ r;
+    r.lo = z.lo != z.lo ? NAN : a.lo;
+    r.hi = z.hi != z.hi ? NAN : a.hi;
+    return r;
+}
+
 /* a / b: NaN where b holds 0 or a quotient is NaN */
 CIV_INLINE civ civ_div(civ a, civ b) {
     double p1 = a.lo / b.lo, p2 = a.lo / b.hi, p3 = a.hi / b.lo, p4 = a.hi / b.hi;

@@ -123,6 +123,7 @@ def _codegen_class() -> type:
             self.size_out = list(size_out)
             self.slots: set[int] = set()
             self.used_inputs: set[int] = set()
+            self.zeros: set[int] = set()  # slots holding 0 (or NaN): a product by 0
 
         def _lit(self, v: float) -> str:
             return c_double(v)
@@ -133,7 +134,7 @@ def _codegen_class() -> type:
                 return f"CIV({c_double(lo)}, {c_double(hi)})"
             return f"v{slot}"
 
-        def _set(self, out: int, expr: str) -> None:
+        def _assign(self, out: int, expr: str) -> None:
             self.consts.pop(out, None)
             self.slots.add(out)
             self.lines.append(f"        v{out} = {expr};")
@@ -153,15 +154,48 @@ def _codegen_class() -> type:
             a = self._civ(i0)
             self._set(out, a if fn is None else f"{fn}({a})")
 
+        def _set(self, out: int, expr: str) -> None:
+            self.zeros.discard(out)
+            self._assign(out, expr)
+
         def _binary(self, k: int, op: int, name: str, out: int, i0: int, i1: int) -> None:
             if op not in _C_BINARY:
                 raise _NoRule(name)
             c0, c1 = self._thin(i0), self._thin(i1)
+            # exact operations with 0 and 1 (a product by constant weights, e.g. the rows
+            # H f of a target): x 1 = x and x + 0 = x exactly; x 0 is 0, or "possibly
+            # undefined" (NaN) where x is, which a sum passes on
             if op == ca.OP_MUL and (c0 is None) != (c1 is None):
                 var, c = (i1, c0) if c0 is not None else (i0, c1)
+                if c == 1.0:
+                    self._set(out, self._civ(var))
+                    if var in self.zeros:
+                        self.zeros.add(out)
+                    return
+                if c == 0.0:
+                    self._set(out, f"civ_zero_of({self._civ(var)})")
+                    self.zeros.add(out)
+                    return
                 if np.isfinite(c):
                     self._set(out, f"civ_mulc({self._civ(var)}, {c_double(c)})")
                     return
+            if op == ca.OP_ADD and (c0 == 0.0 or c1 == 0.0) and (c0 is None) != (c1 is None):
+                var = i1 if c0 is not None else i0
+                self._set(out, self._civ(var))
+                if var in self.zeros:
+                    self.zeros.add(out)
+                return
+            if op in (ca.OP_ADD, ca.OP_SUB) and (i0 in self.zeros or i1 in self.zeros):
+                both = i0 in self.zeros and i1 in self.zeros
+                if i1 in self.zeros:
+                    self._set(out, f"civ_nan_of({self._civ(i0)}, {self._civ(i1)})")
+                elif op == ca.OP_ADD:
+                    self._set(out, f"civ_nan_of({self._civ(i1)}, {self._civ(i0)})")
+                else:
+                    self._set(out, f"civ_nan_of(civ_neg({self._civ(i1)}), {self._civ(i0)})")
+                if both:
+                    self.zeros.add(out)
+                return
             if op == ca.OP_DIV and c1 is not None and c1 != 0.0 and np.isfinite(c1) \
                     and c0 is None:
                 self._set(out, f"civ_divc({self._civ(i0)}, {c_double(c1)})")
@@ -474,6 +508,23 @@ def address(a: np.ndarray) -> int:
         return ctypes.addressof(ctypes.c_char.from_buffer(a))
     except (TypeError, ValueError, BufferError):  # read-only, empty or not contiguous
         return a.__array_interface__["data"][0]
+
+
+_functions: dict[tuple[str, str], Any] = {}  # c_function: loaded (or None for good)
+
+
+def c_function(src: str, name: str, argtypes: Sequence[Any], wait: bool = False) -> Any:
+    """:func:`load_symbol`, remembered per source and name: the C function, or None (no
+    compiler, ``CMPC_NATIVE=0``, or, with ``wait=False``, still compiling in the
+    background: the caller's numpy code answers meanwhile). For the small helper loops of
+    the solvers and sets, each with a numpy twin giving the same answers."""
+    fn = _functions.get((src, name), False)
+    if fn is not False:
+        return fn
+    fn = load_symbol(src, name, argtypes, wait=wait)
+    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
+        _functions[(src, name)] = fn
+    return fn or None
 
 
 def load_symbol(src: str, name: str, argtypes: Sequence[Any], wait: bool = True) -> Any:

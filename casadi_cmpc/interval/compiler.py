@@ -1285,6 +1285,10 @@ class InclusionFunction:
         step = int(self.chunk if run == self._natural else self.chunk_centered)
         if n <= step:
             return run(boxes, n)
+        if run != self._natural and self._native_ready():
+            native = self._centered_native()
+            if native is not None and native[0] in ("fused", "fused_guarded"):
+                return run(boxes, n)  # one C loop, in cache-sized blocks of its own
         # Evaluate in chunks: the temporaries of a chunk stay in cache, which is several
         # times faster than whole-batch numpy operations on large arrays.
         outs = [np.empty((n, d, 2)) for d in self.size_out]

@@ -303,25 +303,18 @@ void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
 }
 """
 _GRID_MAX_N = 16  # dimensions of the C loop (2**n look-ups per query)
-_grid_fn: list[Any] = []  # the loaded C function (or None), once per process
 
 
 def _grid_kernel(wait: bool = False) -> Any:
     """The C grid query, or None (no compiler, ``CMPC_NATIVE=0``, or, with ``wait=False``,
     still compiling: the numpy code answers meanwhile, with the same exact answers)."""
-    if _grid_fn:
-        return _grid_fn[0]
     import ctypes
 
-    from ..interval._native import load_symbol
+    from ..interval._native import c_function
 
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    fn = load_symbol(_GRID_C, "cmpc_grid_query",
-                     [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr, ptr, ptr, ptr, ptr],
-                     wait=wait)
-    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
-        _grid_fn.append(fn)
-    return fn or None
+    return c_function(_GRID_C, "cmpc_grid_query",
+                      [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr, ptr, ptr, ptr, ptr], wait)
 
 
 def _unique_inverse(B: np.ndarray

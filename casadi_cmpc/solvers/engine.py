@@ -509,13 +509,88 @@ def _dense_ids(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(present), rank[group].astype(np.intp)
 
 
+# Per-group reductions of the pair frontiers as C loops (numpy's ufunc.at is slow); the
+# numpy code gives the same answers where no compiler is found and while these compile.
+_GROUP_C = r"""
+#include <stdint.h>
+void cmpc_group_first(int64_t N, const int64_t *g, const unsigned char *mask, int64_t *first)
+{
+    for (int64_t i = N - 1; i >= 0; --i)
+        if (mask[i]) first[g[i]] = i;
+}
+void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
+                     const double *hi, double *glo, double *ghi)
+{
+    for (int64_t i = 0; i < N; ++i) {
+        double *a = glo + g[i] * d, *b = ghi + g[i] * d;
+        const double *l = lo + i * d, *h = hi + i * d;
+        for (int64_t j = 0; j < d; ++j) {  /* numpy.minimum / maximum: a NaN propagates */
+            a[j] = (l[j] < a[j] || l[j] != l[j]) ? l[j] : a[j];
+            b[j] = (h[j] > b[j] || h[j] != h[j]) ? h[j] : b[j];
+        }
+    }
+}
+"""
+_GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
+
+
+_group_fns: dict[str, Any] = {}
+
+
+def _group_kernel(name: str) -> Any:
+    fn = _group_fns.get(name)
+    if fn is not None:
+        return fn
+    import ctypes
+
+    from ..interval._native import c_function
+
+    i64, ptr = ctypes.c_int64, ctypes.c_void_p
+    args = {"cmpc_group_first": [i64, ptr, ptr, ptr],
+            "cmpc_group_hull": [i64, i64, ptr, ptr, ptr, ptr, ptr]}
+    fn = c_function(_GROUP_C, name, args[name])
+    if fn is not None:
+        _group_fns[name] = fn
+    return fn
+
+
+def _ids64(group: np.ndarray) -> np.ndarray:
+    return group if group.dtype == np.int64 and group.flags.c_contiguous else \
+        np.ascontiguousarray(group, dtype=np.int64)
+
+
 def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
     """Per group, the lowest element index with ``mask`` (``len(mask)`` where none), (G,)."""
     N = group.shape[0]
     first = np.full(G, N, dtype=np.intp)
+    fn = _group_kernel("cmpc_group_first") if N >= _GROUP_MIN else None
+    if fn is not None:
+        from ..interval._native import address as a
+
+        m = np.ascontiguousarray(mask, dtype=bool)
+        fn(N, a(_ids64(group)), a(m), a(first))
+        return first
     idx = np.flatnonzero(mask)
     np.minimum.at(first, group[idx], idx)
     return first
+
+
+def _group_hull(inv: np.ndarray, G: int, lo: np.ndarray, hi: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per group ``inv`` (dense ids < G), the hull of the boxes ``lo``, ``hi`` (N, d)."""
+    d = lo.shape[1]
+    glo = np.full((G, d), np.inf)
+    ghi = np.full((G, d), -np.inf)
+    fn = _group_kernel("cmpc_group_hull") if lo.shape[0] >= _GROUP_MIN else None
+    if fn is not None:
+        from ..interval._native import address as a
+
+        fn(lo.shape[0], d, a(_ids64(inv)), a(np.ascontiguousarray(lo, dtype=float)),
+           a(np.ascontiguousarray(hi, dtype=float)), a(glo), a(ghi))
+        return glo, ghi
+    np.minimum.at(glo, inv, lo)
+    np.maximum.at(ghi, inv, hi)
+    return glo, ghi
 
 
 @dataclass
@@ -755,10 +830,7 @@ class PairFrontier:
             P = self if ix.size == N else self.take(ix)
             ug, inv = _dense_ids(P.group)
             G = ug.size
-            lo = np.full((G, P.lo.shape[1]), np.inf)
-            hi = np.full((G, P.lo.shape[1]), -np.inf)
-            np.minimum.at(lo, inv, P.lo)
-            np.maximum.at(hi, inv, P.hi)
+            lo, hi = _group_hull(inv, G, P.lo, P.hi)
             first = _group_first(inv, np.ones(len(P), dtype=bool), G)
             data = None if P.data is None else {
                 key: v.take(first, axis=0) for key, v in P.data.items()}

@@ -13,6 +13,7 @@ from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
 from ..interval._derivative import ParamFunction
 from ..interval._native import address as _address
+from ..interval._native import c_function
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.base import SetBase
@@ -142,7 +143,6 @@ void cmpc_sivia_decide(int64_t n, int64_t k, const double *img, const double *t,
         labels[i] = (signed char)(labels[i] ? -1 : (mask[i] == 0));
 }
 """
-_decide_fn: list[Any] = []  # the loaded C function (or None), once per process
 
 
 def _ptr(a: np.ndarray) -> int:
@@ -154,18 +154,11 @@ def _decide_kernel(wait: bool = False) -> Any:
     """The C decision of a joint image, or None (no compiler, ``CMPC_NATIVE=0``, or, with
     ``wait=False``, still compiling in the background: numpy decides meanwhile, with the
     same answers)."""
-    if _decide_fn:
-        return _decide_fn[0]
     import ctypes
 
-    from ..interval._native import load_symbol
-
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    fn = load_symbol(_DECIDE_C, "cmpc_sivia_decide", [i64, i64, ptr, ptr, ptr, i64, ptr, ptr],
-                     wait=wait)
-    if fn or fn is None:  # loaded, or unavailable for good; PENDING: ask again next time
-        _decide_fn.append(fn)
-    return fn or None
+    return c_function(_DECIDE_C, "cmpc_sivia_decide", [i64, i64, ptr, ptr, ptr, i64, ptr, ptr],
+                      wait)
 
 
 def _defined(l: Any, h: Any) -> Any:

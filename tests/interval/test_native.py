@@ -9,6 +9,7 @@ import ctypes.util
 import warnings
 
 import casadi as ca
+import mpmath
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -413,3 +414,45 @@ def test_address_is_the_data_pointer_of_every_kind_of_array():
     ro.flags.writeable = False
     for x in (a, a[1:], ro, np.empty(0), np.broadcast_to(np.ones(3), (3,)), np.zeros(5, bool)):
         assert address(x) == x.ctypes.data
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), kind=st.sampled_from(["natural", "centered"]))
+def test_weights_0_and_1_are_exact_and_keep_undefined_parts(seed, kind):
+    """Rows ``H f`` with exact weights (0, 1, -1 and others, as the targets' row functions):
+    the native kernel folds x 1 = x, x + 0 = x and x 0 = 0 exactly. Its enclosures hold the
+    exact values (60 digits), a row of weights 0 and 1 on exactly representable parts is
+    exact (no widening), and a part that is possibly undefined (log of a box reaching 0)
+    keeps its row possibly undefined even with weight 0, as numpy says."""
+    from casadi_cmpc.interval._derivative import ParamFunction
+
+    if not nat.native_available():
+        pytest.skip("no C compiler")
+    rng = np.random.default_rng(seed)
+    x = ca.SX.sym("x", 2)
+    parts = ca.vertcat(ca.log(x[0]), ca.sin(x[1]) * x[0], x[0], x[1])
+    H = ca.SX.sym("H", 3, 4)
+    g = ca.Function("rows", [x, H], [ca.mtimes(H, parts)])
+    w = rng.choice([0.0, 1.0, -1.0, 0.5, 2.0, 0.0, 1.0], (3, 4))
+    w[2] = [0.0, 0.0, 1.0, 0.0]  # the last row is x0: exact
+    pf = ParamFunction(g, 1, w.ravel(order="F"))
+    lo = rng.uniform(-1.0, 2.0, (40, 2))
+    B = np.stack([lo, lo + rng.uniform(0.0, 0.5, (40, 2))], axis=-1)
+    a = InclusionFunction(pf, kind, backend="native")(B)[0]
+    b = InclusionFunction(pf, kind, backend="numpy")(B)[0]
+    whole = (a[..., 0] == -np.inf) & (a[..., 1] == np.inf)
+    assert (whole == ((b[..., 0] == -np.inf) & (b[..., 1] == np.inf))).all()
+    undefined = (B[:, 0, 0] <= 0.0)[:, None] & (w[:, 0] != 0.0)[None, :]
+    assert whole[undefined].all()
+    if kind == "natural":  # (0 log x0 is possibly undefined where x0 may be <= 0)
+        pos = B[:, 0, 0] > 0.0
+        assert (a[pos, 2, 0] == B[pos, 0, 0]).all() and (a[pos, 2, 1] == B[pos, 0, 1]).all()
+    f = ca.Function("exact", [x], [ca.mtimes(ca.DM(w), parts)])
+    for k in range(0, 40, 4):
+        for t in (0.0, 0.37, 1.0):
+            p = B[k, :, 0] + t * (B[k, :, 1] - B[k, :, 0])
+            p = np.clip(p, B[k, :, 0], B[k, :, 1])
+            ref = eval_function(f, [list(p)])[0]
+            for j in range(3):
+                if isinstance(ref[j], mpmath.mpf):  # (else undefined at p)
+                    assert inside(a[k, j, 0], a[k, j, 1], ref[j]), (kind, k, j)

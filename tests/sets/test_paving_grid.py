@@ -45,7 +45,6 @@ def _grid_c_loaded() -> bool:
     """Load the C grid query (waiting for its compilation); False without a compiler."""
     from casadi_cmpc.sets import _boxunion as bu
 
-    bu._grid_fn[:] = []
     return bu._grid_kernel(wait=True) is not None
 
 
@@ -81,13 +80,16 @@ def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
     got_c = G._native(Q[fat], True)
     assert got_c is not None
     got_i = G.intersects(Q)
-    saved = bu._grid_fn[:]
-    bu._grid_fn[:] = [None]
+    from casadi_cmpc.interval import _native
+
+    key = (bu._GRID_C, "cmpc_grid_query")
+    saved = _native._functions[key]
+    _native._functions[key] = None  # as without a compiler: the numpy code
     try:
         ref_c = G.contains(Q[fat])
         ref_i = G.intersects(Q)
     finally:
-        bu._grid_fn[:] = saved
+        _native._functions[key] = saved
     assert (got_c == ref_c).all()
     assert (got_i == ref_i).all()
     assert G.intersects(Q)[~np.isfinite(Q).all(axis=(1, 2))].all()
