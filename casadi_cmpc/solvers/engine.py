@@ -537,7 +537,9 @@ _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
 _group_fns: dict[str, Any] = {}
 
 
-def _group_kernel(name: str) -> Any:
+def _group_kernel(name: str, wait: bool = False) -> Any:
+    """The C loop ``name`` of :data:`_GROUP_C`, or None (not available, or still compiling
+    with ``wait=False``)."""
     fn = _group_fns.get(name)
     if fn is not None:
         return fn
@@ -548,7 +550,7 @@ def _group_kernel(name: str) -> Any:
     i64, ptr = ctypes.c_int64, ctypes.c_void_p
     args = {"cmpc_group_first": [i64, ptr, ptr, ptr],
             "cmpc_group_hull": [i64, i64, ptr, ptr, ptr, ptr, ptr]}
-    fn = c_function(_GROUP_C, name, args[name])
+    fn = c_function(_GROUP_C, name, args[name], wait)
     if fn is not None:
         _group_fns[name] = fn
     return fn
