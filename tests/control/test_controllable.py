@@ -700,3 +700,35 @@ def test_a_search_that_proves_nothing_is_not_proved():
                              0.5, progress=False, u_eps=0.5, max_cells=1)
     assert coarse.paving.n_inner == 0 and coarse.status == cm.Status.UNDECIDED
     assert "no state box proven" in coarse.message and coarse.volume() == 0.0
+
+
+def test_target_rows_up_to_sign_describe_the_same_polytope():
+    """`_signed_rows` (a row and its negation enclosed once, repeated rows merged) keeps
+    exactly the set {A x <= b}: random rows with negated copies, repeats, zero rows and
+    -0.0 entries, tested on points."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from casadi_cmpc.control.controllable import _signed_rows
+
+    @settings(max_examples=150, deadline=None)
+    @given(seed=st.integers(0, 10 ** 6), r=st.integers(1, 12), n=st.integers(1, 4))
+    def check(seed, r, n):
+        rng = np.random.default_rng(seed)
+        # dyadic entries and points: every product and sum below is exact, whatever the
+        # order of summation
+        A = rng.integers(-3, 4, (r, n)).astype(float) * rng.choice([1.0, 0.5, 2.0 ** -10],
+                                                                   (r, 1))
+        pick = rng.integers(0, r, r)
+        extra = np.where(rng.random((r, 1)) < 0.5, -A[pick], A[pick])  # negated / repeated
+        A = np.vstack([A, extra, np.zeros((1, n)), -np.zeros((1, n))])
+        b = rng.normal(size=A.shape[0])
+        D, lower, upper = _signed_rows(A, b)
+        assert D.shape[0] <= A.shape[0] and (lower <= upper).sum() <= D.shape[0]
+        P = rng.integers(-64, 65, (400, n)) / 16.0
+        want = (P @ A.T <= b).all(axis=1)
+        V = P @ D.T
+        got = ((V <= upper) & (V >= lower)).all(axis=1)
+        assert (want == got).all()
+
+    check()
