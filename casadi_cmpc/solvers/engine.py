@@ -675,6 +675,8 @@ class PairFrontier:
     restart: dict[str, np.ndarray] | None = None
     shared: str | None = None
     _u_mode: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # per pair: its cell can still be split (set by reduce, kept by take, read by split)
+    _u_can: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_boxes(cls, X: np.ndarray, U: np.ndarray, *, x_scale: np.ndarray | None = None,
@@ -727,11 +729,11 @@ class PairFrontier:
         return np.stack([self.lo, self.hi], axis=-1)
 
     def _with(self, lo: np.ndarray, hi: np.ndarray, group: np.ndarray,
-              data: dict[str, np.ndarray] | None, u_mode: np.ndarray | None = None
-              ) -> PairFrontier:
+              data: dict[str, np.ndarray] | None, u_mode: np.ndarray | None = None,
+              u_can: np.ndarray | None = None) -> PairFrontier:
         return PairFrontier(lo, hi, group, self.n, self.x_scale, self.u_scale, self.u_eps,
                             self.max_cells, self.split_ratio, data, self.u_box, self.restart,
-                            self.shared, u_mode)
+                            self.shared, u_mode, u_can)
 
     def take(self, mask: np.ndarray) -> PairFrontier:
         idx = np.asarray(mask)
@@ -740,8 +742,9 @@ class PairFrontier:
         data = None if self.data is None else {
             k: v.take(idx, axis=0) for k, v in self.data.items()}
         mode = None if self._u_mode is None else self._u_mode.take(idx)
+        can = None if self._u_can is None else self._u_can.take(idx)
         return self._with(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0),
-                          self.group.take(idx), data, mode)
+                          self.group.take(idx), data, mode, can)
 
     take_done = take  # proven pairs keep their data (the proving control)
 
@@ -782,7 +785,8 @@ class PairFrontier:
         und = live[g] & ~outer & ~inner
         out[und] = UNDECIDED
         # groups that can neither split a cell nor their state box are boundary
-        split_u = und & self._u_splittable()
+        self._u_can = self._u_splittable()
+        split_u = und & self._u_can
         n_live = np.bincount(g, weights=und, minlength=G)
         n_split = np.bincount(g, weights=split_u, minlength=G)
         u_ok = (n_split > 0) & (n_live + n_split <= self.max_cells)
@@ -812,7 +816,7 @@ class PairFrontier:
         iu = np.flatnonzero(mode)
         if iu.size:
             P = self if iu.size == N else self.take(iu)
-            can = P._u_splittable()
+            can = P._u_can if P._u_can is not None else P._u_splittable()
             keep = P.take(~can)
             S = P if can.all() else P.take(can)
             if len(S):
