@@ -185,6 +185,9 @@ class _ComponentClassifier:
     #: native kernel (every element at once) once the function has moved to it: one call
     #: of a few microseconds, against one numpy evaluation per open element
     JOINT_MIN = 1
+    #: levels of at least this many boxes count toward the function's move to its native
+    #: kernel (a search of small levels only does not compile one)
+    JOINT_COUNT_MIN = 64
 
     def __init__(self, comps: list[tuple[Any, Thresholds]], open_target: bool,
                  step: int, joint: tuple[InclusionFunction, list[Thresholds]] | None = None
@@ -251,14 +254,15 @@ class _ComponentClassifier:
 
     def _joint_image(self, fr: BoxFrontier) -> np.ndarray | None:
         """Every element's enclosure (N, k, 2) by one call of the native kernel, for a
-        large level of a function that has moved to it (see
-        :meth:`InclusionFunction.evaluate_unchecked`: the move depends on the calls made,
-        not on timings); None: the elements are evaluated one by one."""
+        level of a function that has moved to it (levels of :attr:`JOINT_COUNT_MIN` boxes
+        or more count toward the move, see :meth:`InclusionFunction.evaluate_unchecked`:
+        it depends on the calls made, not on timings); None: the elements are evaluated
+        one by one."""
         if self.joint is None or len(fr) < self.JOINT_MIN:
             return None
         F = self.joint[0]
         N = len(fr)
-        if not F._wants_native(N):
+        if not (F._wants_native(N) if N >= self.JOINT_COUNT_MIN else F._native_ready()):
             return None
         run = F._native_kernel()
         if run is None:

@@ -771,3 +771,21 @@ def test_joint_decision_c_numpy_and_per_element_agree(k, N, open_target, seed):
        mod._ptr(c_mask), mod._ptr(labels))
     assert (c_mask == ref_mask).all()
     assert (labels == ref_labels).all()
+
+
+def test_a_search_of_small_levels_does_not_compile_a_kernel():
+    """Levels under JOINT_COUNT_MIN boxes do not count toward the move to the native
+    kernel: a small SIVIA repeated many times stays on the numpy element evaluators (no
+    compilation for it), and its paving is the same every time."""
+    from casadi_cmpc.solvers.sivia import _ComponentClassifier
+
+    x = ca.SX.sym("x", 2)
+    F = cm.interval.inclusion(ca.Function("disk_band", [x], [ca.vertcat(
+        x[0] ** 2 + x[1] ** 2, x[0] - x[1])]))
+    Y = cm.Box([0.0, -1.0], [1.0, 1.0])
+    first = cm.sivia(F, cm.Box([-2, -2], [2, 2]), Y, 0.5, progress=False)
+    assert max(h["classified"] for h in first.history) < _ComponentClassifier.JOINT_COUNT_MIN
+    for _ in range(40):
+        P = cm.sivia(F, cm.Box([-2, -2], [2, 2]), Y, 0.5, progress=False)
+        assert np.array_equal(P.inner, first.inner)
+    assert F._native is None and F._native_batches == 0
