@@ -416,7 +416,7 @@ def test_address_is_the_data_pointer_of_every_kind_of_array():
         assert address(x) == x.ctypes.data
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=12, deadline=None)  # each example compiles its own kernel
 @given(seed=st.integers(0, 10 ** 6), kind=st.sampled_from(["natural", "centered"]))
 def test_weights_0_and_1_are_exact_and_keep_undefined_parts(seed, kind):
     """Rows ``H f`` with exact weights (0, 1, -1 and others, as the targets' row functions):
