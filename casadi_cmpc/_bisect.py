@@ -19,6 +19,7 @@ It lives at the top of the package because every layer (``interval``, ``sets``,
 
 from __future__ import annotations
 
+import ctypes
 from typing import Any
 
 import numpy as np
@@ -85,39 +86,20 @@ NATIVE_MIN = 16
 _COLUMN_MAX = 8
 
 
-_loaded: dict[str, Any] = {}  # the C functions once loaded
+_I64, _PTR = ctypes.c_int64, ctypes.c_void_p
+_ARGS = {"cmpc_widest": [_I64, _I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR],
+         "cmpc_bisect": [_I64, _I64, _PTR, _PTR, _PTR, ctypes.c_double, _I64, _PTR, _PTR, _PTR]}
+_native: list[Any] = []  # [c_function, address] of interval._native (which imports this)
 
 
 def _kernel(name: str, wait: bool = False) -> Any:
     """The C function ``name`` of :data:`_BISECT_C`, or None (no compiler, ``CMPC_NATIVE=0``,
     or, with ``wait=False``, still compiling in the background)."""
-    fn = _loaded.get(name)
-    if fn is not None:
-        return fn
-    import ctypes
+    if not _native:
+        from .interval._native import address, c_function
 
-    from .interval._native import c_function
-
-    i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    args = {"cmpc_widest": [i64, i64, i64, ptr, ptr, ptr, ptr, ptr],
-            "cmpc_bisect": [i64, i64, ptr, ptr, ptr, ctypes.c_double, i64, ptr, ptr, ptr]}
-    fn = c_function(_BISECT_C, name, args[name], wait)
-    if fn is not None:
-        global _ptr
-        from .interval._native import address as _ptr
-        _loaded[name] = fn
-    return fn
-
-
-def _ptr(a: np.ndarray) -> int:
-    """The address of a C-contiguous array's data (:func:`~casadi_cmpc.interval._native.address`,
-    bound once a kernel is loaded)."""
-    raise RuntimeError("no C kernel loaded")
-
-
-def _f64(a: np.ndarray) -> np.ndarray:
-    return a if a.dtype == np.float64 and a.flags.c_contiguous else \
-        np.ascontiguousarray(a, dtype=np.float64)
+        _native[:] = [c_function, address]
+    return _native[0](_BISECT_C, name, _ARGS[name], wait)
 
 
 def widest_of(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None,
@@ -131,14 +113,16 @@ def widest_of(lo: np.ndarray, hi: np.ndarray, scale: np.ndarray | None = None,
     if N >= NATIVE_MIN and 0 < n <= _COLUMN_MAX:
         fn = _kernel("cmpc_widest")
         if fn is not None:
-            lo, hi = _f64(lo), _f64(hi)
-            sc = None if scale is None else _f64(
-                scale if np.shape(scale) == (n,) else np.broadcast_to(scale, (n,)))
+            a = _native[1]
+            lo = np.ascontiguousarray(lo, dtype=np.float64)
+            hi = np.ascontiguousarray(hi, dtype=np.float64)
+            sc = None if scale is None else np.ascontiguousarray(
+                np.broadcast_to(scale, (n,)), dtype=np.float64)
             best = np.empty(N)
             k = np.empty(N, dtype=np.int64)
             off = 8 * start
-            fn(N, n, n_all, _ptr(lo) + off, _ptr(hi) + off, None if sc is None else _ptr(sc),
-               _ptr(best), _ptr(k))
+            fn(N, n, n_all, a(lo) + off, a(hi) + off, None if sc is None else a(sc), a(best),
+               a(k))
             return best, k.view(np.intp)
     with np.errstate(over="ignore", invalid="ignore"):
         w = hi[:, start:stop] - lo[:, start:stop]
@@ -285,15 +269,15 @@ def bisect_widest(lo: np.ndarray, hi: np.ndarray, widths: np.ndarray | None = No
     if N >= NATIVE_MIN and not (exact_mid and ratio == 0.5):
         fn = _kernel("cmpc_bisect")
         if fn is not None:
-            lo, hi = _f64(lo), _f64(hi)
-            kk = k if k.dtype == np.int64 and k.flags.c_contiguous else \
-                np.ascontiguousarray(k, dtype=np.int64)
+            a = _native[1]
+            lo = np.ascontiguousarray(lo, dtype=np.float64)
+            hi = np.ascontiguousarray(hi, dtype=np.float64)
+            kk = np.ascontiguousarray(k, dtype=np.int64)
             lo2 = np.empty((2 * N, n))
             hi2 = np.empty((2 * N, n))
             ok = np.empty(N, dtype=bool)
             r = float(ratio)
-            fn(N, n, _ptr(lo), _ptr(hi), _ptr(kk), r, int(r == 0.5), _ptr(lo2), _ptr(hi2),
-               _ptr(ok))
+            fn(N, n, a(lo), a(hi), a(kk), r, int(r == 0.5), a(lo2), a(hi2), a(ok))
             return lo2, hi2, k, ok
     flat = np.arange(N) * n + k  # position of the split bound in lo.ravel()
     a = lo.take(flat)

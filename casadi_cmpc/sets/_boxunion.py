@@ -12,6 +12,7 @@ These are the machinery of :class:`~casadi_cmpc.Paving`.
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 from typing import Any
 
@@ -305,16 +306,16 @@ void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
 _GRID_MAX_N = 16  # dimensions of the C loop (2**n look-ups per query)
 
 
+_GRID_ARGS = [ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 5 + [ctypes.c_int64] \
+    + [ctypes.c_void_p] * 5
+
+
 def _grid_kernel(wait: bool = False) -> Any:
     """The C grid query, or None (no compiler, ``CMPC_NATIVE=0``, or, with ``wait=False``,
     still compiling: the numpy code answers meanwhile, with the same exact answers)."""
-    import ctypes
-
     from ..interval._native import c_function
 
-    i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    return c_function(_GRID_C, "cmpc_grid_query",
-                      [i64, i64, ptr, ptr, ptr, ptr, ptr, i64, ptr, ptr, ptr, ptr, ptr], wait)
+    return c_function(_GRID_C, "cmpc_grid_query", _GRID_ARGS, wait)
 
 
 def _unique_inverse(B: np.ndarray

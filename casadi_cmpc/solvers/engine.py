@@ -21,6 +21,7 @@ is still sound: everything not classified is reported as boundary (undecided).
 
 from __future__ import annotations
 
+import ctypes
 import enum
 import time
 import warnings
@@ -33,6 +34,7 @@ import numpy as np
 from .._bisect import bisect_widest, widest_of
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
+from ..interval._native import address, c_function
 from ._common import positive_eps
 from ._parallel import LevelRunner, _two_phase
 
@@ -534,31 +536,15 @@ void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
 _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
 
 
-_group_fns: dict[str, Any] = {}
+_I64, _PTR = ctypes.c_int64, ctypes.c_void_p
+_GROUP_ARGS = {"cmpc_group_first": [_I64, _PTR, _PTR, _PTR],
+               "cmpc_group_hull": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR]}
 
 
 def _group_kernel(name: str, wait: bool = False) -> Any:
     """The C loop ``name`` of :data:`_GROUP_C`, or None (not available, or still compiling
     with ``wait=False``)."""
-    fn = _group_fns.get(name)
-    if fn is not None:
-        return fn
-    import ctypes
-
-    from ..interval._native import c_function
-
-    i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    args = {"cmpc_group_first": [i64, ptr, ptr, ptr],
-            "cmpc_group_hull": [i64, i64, ptr, ptr, ptr, ptr, ptr]}
-    fn = c_function(_GROUP_C, name, args[name], wait)
-    if fn is not None:
-        _group_fns[name] = fn
-    return fn
-
-
-def _ids64(group: np.ndarray) -> np.ndarray:
-    return group if group.dtype == np.int64 and group.flags.c_contiguous else \
-        np.ascontiguousarray(group, dtype=np.int64)
+    return c_function(_GROUP_C, name, _GROUP_ARGS[name], wait)
 
 
 def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
@@ -567,10 +553,8 @@ def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
     first = np.full(G, N, dtype=np.intp)
     fn = _group_kernel("cmpc_group_first") if N >= _GROUP_MIN else None
     if fn is not None:
-        from ..interval._native import address as a
-
-        m = np.ascontiguousarray(mask, dtype=bool)
-        fn(N, a(_ids64(group)), a(m), a(first))
+        fn(N, address(np.ascontiguousarray(group, dtype=np.int64)),
+           address(np.ascontiguousarray(mask, dtype=bool)), address(first))
         return first
     idx = np.flatnonzero(mask)
     np.minimum.at(first, group[idx], idx)
@@ -585,10 +569,9 @@ def _group_hull(inv: np.ndarray, G: int, lo: np.ndarray, hi: np.ndarray
     ghi = np.full((G, d), -np.inf)
     fn = _group_kernel("cmpc_group_hull") if lo.shape[0] >= _GROUP_MIN else None
     if fn is not None:
-        from ..interval._native import address as a
-
-        fn(lo.shape[0], d, a(_ids64(inv)), a(np.ascontiguousarray(lo, dtype=float)),
-           a(np.ascontiguousarray(hi, dtype=float)), a(glo), a(ghi))
+        fn(lo.shape[0], d, address(np.ascontiguousarray(inv, dtype=np.int64)),
+           address(np.ascontiguousarray(lo, dtype=float)),
+           address(np.ascontiguousarray(hi, dtype=float)), address(glo), address(ghi))
         return glo, ghi
     np.minimum.at(glo, inv, lo)
     np.maximum.at(ghi, inv, hi)

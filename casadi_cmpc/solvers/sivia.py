@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,8 +13,7 @@ from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
 from ..interval._derivative import ParamFunction
-from ..interval._native import address as _address
-from ..interval._native import c_function
+from ..interval._native import address, c_function
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.base import SetBase
@@ -145,20 +145,15 @@ void cmpc_sivia_decide(int64_t n, int64_t k, const double *img, const double *t,
 """
 
 
-def _ptr(a: np.ndarray) -> int:
-    """The address of a C-contiguous array's data."""
-    return _address(a)
+_DECIDE_ARGS = [ctypes.c_int64, ctypes.c_int64] + [ctypes.c_void_p] * 3 + [ctypes.c_int64] \
+    + [ctypes.c_void_p] * 2
 
 
 def _decide_kernel(wait: bool = False) -> Any:
     """The C decision of a joint image, or None (no compiler, ``CMPC_NATIVE=0``, or, with
     ``wait=False``, still compiling in the background: numpy decides meanwhile, with the
     same answers)."""
-    import ctypes
-
-    i64, ptr = ctypes.c_int64, ctypes.c_void_p
-    return c_function(_DECIDE_C, "cmpc_sivia_decide", [i64, i64, ptr, ptr, ptr, i64, ptr, ptr],
-                      wait)
+    return c_function(_DECIDE_C, "cmpc_sivia_decide", _DECIDE_ARGS, wait)
 
 
 def _defined(l: Any, h: Any) -> Any:
@@ -319,8 +314,8 @@ class _ComponentClassifier:
             if fn is not None:
                 mask = np.ascontiguousarray(mask)
                 labels = np.empty(N, dtype=np.int8)
-                fn(N, self.k, _ptr(img), _ptr(self.t_all), _ptr(self.flags),
-                   int(self.open_target), _ptr(mask), _ptr(labels))
+                fn(N, self.k, address(img), address(self.t_all), address(self.flags),
+                   int(self.open_target), address(mask), address(labels))
                 data["open"] = mask
                 fr.data = data
                 return labels

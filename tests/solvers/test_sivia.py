@@ -767,8 +767,8 @@ def test_joint_decision_c_numpy_and_per_element_agree(k, N, open_target, seed):
     c_mask = mask.copy()
     labels = np.empty(N, dtype=np.int8)
     img = np.ascontiguousarray(img)
-    fn(N, k, mod._ptr(img), mod._ptr(cls.t_all), mod._ptr(cls.flags), int(open_target),
-       mod._ptr(c_mask), mod._ptr(labels))
+    a = mod.address
+    fn(N, k, a(img), a(cls.t_all), a(cls.flags), int(open_target), a(c_mask), a(labels))
     assert (c_mask == ref_mask).all()
     assert (labels == ref_labels).all()
 
