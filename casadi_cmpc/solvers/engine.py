@@ -532,13 +532,63 @@ void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
         }
     }
 }
+/* PairFrontier.reduce: group labels from pair labels (1 inner, -1 outer, 0 undecided,
+ * 2 dropped), in three passes; cnt, n_in, n_out, n_live, n_split, first_in, first_any,
+ * first_und: G int64 each, zeroed (first_*: N) by the caller */
+void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char *lab,
+                      const unsigned char *u_can, const unsigned char *x_small_pair,
+                      int64_t max_cells, int64_t *cnt, int64_t *n_in, int64_t *n_out,
+                      int64_t *n_live, int64_t *n_split, int64_t *first_in,
+                      int64_t *first_any, int64_t *first_und, unsigned char *gflag,
+                      signed char *out, unsigned char *small, unsigned char *u_mode)
+{
+    /* gflag bits: 1 inner, 2 outer, 4 u_ok, 8 x_small, 16 exhausted */
+    for (int64_t i = 0; i < N; ++i) {
+        int64_t k = g[i];
+        cnt[k] += 1;
+        if (lab[i] == 1) { n_in[k] += 1; if (first_in[k] == N) first_in[k] = i; }
+        if (lab[i] == -1) n_out[k] += 1;
+        if (first_any[k] == N) first_any[k] = i;
+        gflag[k] = (unsigned char)((gflag[k] & ~8) | (x_small_pair[i] ? 8 : 0)); /* last wins */
+    }
+    for (int64_t k = 0; k < G; ++k) {
+        if (n_in[k] > 0) gflag[k] |= 1;
+        else if (cnt[k] > 0 && n_out[k] == cnt[k]) gflag[k] |= 2;
+    }
+    for (int64_t i = 0; i < N; ++i) {
+        int64_t k = g[i];
+        if (!(gflag[k] & 3) && lab[i] != 1 && lab[i] != -1) {
+            n_live[k] += 1;
+            if (u_can[i]) n_split[k] += 1;
+            if (first_und[k] == N) first_und[k] = i;
+        }
+    }
+    for (int64_t k = 0; k < G; ++k) {
+        if (n_split[k] > 0 && n_live[k] + n_split[k] <= max_cells) gflag[k] |= 4;
+        if (!(gflag[k] & 3) && !(gflag[k] & 4) && (gflag[k] & 8)) gflag[k] |= 16;
+    }
+    for (int64_t i = 0; i < N; ++i) {
+        int64_t k = g[i];
+        unsigned char f = gflag[k];
+        signed char o = 2;
+        if ((f & 1) && first_in[k] == i) o = 1;
+        else if ((f & 2) && first_any[k] == i) o = -1;
+        else if (!(f & 3) && lab[i] != 1 && lab[i] != -1)
+            o = (f & 16) ? (first_und[k] == i ? 0 : 2) : 0;
+        out[i] = o;
+        small[i] = (unsigned char)((f & 16) && first_und[k] == i);
+        u_mode[i] = (unsigned char)((f & 4) != 0);
+    }
+}
 """
 _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
 
 
 _I64, _PTR = ctypes.c_int64, ctypes.c_void_p
 _GROUP_ARGS = {"cmpc_group_first": [_I64, _PTR, _PTR, _PTR],
-               "cmpc_group_hull": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR]}
+               "cmpc_group_hull": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR],
+               "cmpc_pair_reduce": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _I64]
+               + [_PTR] * 12}
 
 
 def _group_kernel(name: str, wait: bool = False) -> Any:
@@ -749,6 +799,10 @@ class PairFrontier:
             return out, small
         g = self.group
         G = int(g.max()) + 1
+        if self.shared is None and N >= _GROUP_MIN:
+            got = self._reduce_native(labels, eps, G)
+            if got is not None:
+                return got
         inner = labels == INNER
         outer = labels == OUTER
         g_in = np.bincount(g, weights=inner, minlength=G) > 0
@@ -781,6 +835,32 @@ class PairFrontier:
         out[und & exhausted[g]] = DROPPED
         out[rep] = UNDECIDED
         self._u_mode = u_ok[g]
+        return out, small
+
+    def _reduce_native(self, labels: np.ndarray, eps: float, G: int
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`reduce` (without shared exclusion) as one C loop: the same labels, small
+        flags and split modes; None where the loop is not available."""
+        fn = _group_kernel("cmpc_pair_reduce")
+        if fn is None:
+            return None
+        N = len(self)
+        self._u_can = u_can = self._u_splittable()
+        x_small = self.width() <= eps
+        cnt = np.zeros((5, G), dtype=np.int64)  # cnt, n_in, n_out, n_live, n_split
+        first = np.full((3, G), N, dtype=np.int64)  # first inner, first pair, first undecided
+        gflag = np.zeros(G, dtype=np.uint8)
+        out = np.empty(N, dtype=np.int8)
+        small = np.empty(N, dtype=bool)
+        mode = np.empty(N, dtype=bool)
+        a = address
+        c0 = a(cnt)
+        f0 = a(first)
+        fn(N, G, a(np.ascontiguousarray(self.group, dtype=np.int64)),
+           a(np.ascontiguousarray(labels, dtype=np.int8)), a(u_can), a(x_small),
+           self.max_cells, c0, c0 + 8 * G, c0 + 16 * G, c0 + 24 * G, c0 + 32 * G,
+           f0, f0 + 8 * G, f0 + 16 * G, a(gflag), a(out), a(small), a(mode))
+        self._u_mode = mode
         return out, small
 
     def split(self) -> tuple[PairFrontier, PairFrontier]:

@@ -207,3 +207,47 @@ def test_group_loops_in_c_equal_numpy(seed, N, G, d):
     np.maximum.at(ref_hi, g, hi)
     assert (first == ref_first).all()
     assert np.array_equal(glo, ref_lo) and np.array_equal(ghi, ref_hi)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), N=st.integers(64, 300), G=st.integers(1, 40),
+       n=st.integers(1, 3), m=st.integers(0, 2), max_cells=st.integers(1, 8),
+       eps=st.sampled_from([0.005, 0.05, 0.2]), sorted_groups=st.booleans())
+def test_reduce_in_c_equals_numpy(seed, N, G, n, m, max_cells, eps, sorted_groups):
+    """PairFrontier.reduce by its C loop gives the labels, small flags, splittable cells and
+    split modes of the numpy reduction: groups with inner, outer and undecided pairs, group
+    ids absent from the frontier, boxes at the eps limit and cells at the u_eps limit."""
+    from casadi_cmpc.interval._native import native_available
+    from casadi_cmpc.solvers import engine as E
+
+    if not native_available():
+        return
+    assert E._group_kernel("cmpc_pair_reduce", wait=True) is not None
+    rng = np.random.default_rng(seed)
+    g = rng.integers(0, G, N)
+    if sorted_groups:
+        g = np.sort(g)
+    xlo = rng.uniform(-1, 1, (G, n))
+    xw = rng.choice([eps / 2, eps, 2 * eps], (G, n))  # at the limit too
+    ulo = rng.uniform(-1, 0, (N, m))
+    uw = rng.choice([0.025, 0.05, 0.5], (N, m))
+    lo = np.ascontiguousarray(np.concatenate([xlo[g], ulo], axis=1))
+    hi = np.ascontiguousarray(np.concatenate([xlo[g] + xw[g], ulo + uw], axis=1))
+    labels = rng.choice(np.array([INNER, OUTER, UNDECIDED], dtype=np.int8), N,
+                        p=rng.dirichlet([1.0, 1.0, 1.0]))
+
+    def frontier():
+        return PairFrontier(lo, hi, g.astype(np.intp), n, np.ones(n), np.ones(m), u_eps=0.05,
+                            max_cells=max_cells)
+
+    a, b = frontier(), frontier()
+    got = a._reduce_native(labels, eps, int(g.max()) + 1)
+    saved = E._GROUP_MIN
+    E._GROUP_MIN = 10 ** 9  # the numpy reduction
+    try:
+        ref = b.reduce(labels, eps)
+    finally:
+        E._GROUP_MIN = saved
+    assert got is not None
+    assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+    assert np.array_equal(a._u_mode, b._u_mode) and np.array_equal(a._u_can, b._u_can)
