@@ -371,11 +371,15 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             out_part = _untag(take_done(i_out)) if keep_outer and i_out.size else None
             small_part = _untag(take_done(i_small)) if i_small.size else None
             stuck_part = None
-            grow = frontier.take(i_grow)
-            if not len(grow):
+            split_selected = getattr(frontier, "split_selected", None)
+            grow = frontier.take(i_grow) if split_selected is None or not i_grow.size \
+                else None
+            if grow is not None and not len(grow):
                 nxt = grow
             elif splits:
-                nxt, stuck = grow.split()
+                # the growing elements split (without gathering them first where the
+                # frontier can: the same children)
+                nxt, stuck = split_selected(i_grow) if grow is None else grow.split()
                 if len(stuck):  # too narrow for floating point: undecided for good
                     if tagged:
                         stuck = stuck.take(np.argsort(stuck.data[_PART], kind="stable"))
@@ -515,6 +519,7 @@ def _dense_ids(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # numpy code gives the same answers where no compiler is found and while these compile.
 _GROUP_C = r"""
 #include <stdint.h>
+#include <math.h>
 void cmpc_group_first(int64_t N, const int64_t *g, const unsigned char *mask, int64_t *first)
 {
     for (int64_t i = N - 1; i >= 0; --i)
@@ -532,11 +537,30 @@ void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
         }
     }
 }
+/* the widest coordinate of [l, h] (n coordinates, widths divided by sc) and its width
+ * (*w): cmpc_widest's rule (a NaN width propagates) */
+static int64_t pair_widest(const double *l, const double *h, const double *sc, int64_t n,
+                           double *wid)
+{
+    double b = (h[0] - l[0]) / sc[0];
+    int64_t kk = 0;
+    for (int64_t j = 1; j < n; ++j) {
+        double w = (h[j] - l[j]) / sc[j];
+        if (w > b) kk = j;
+        if (w > b || w != w) b = w;
+    }
+    *wid = b;
+    return kk;
+}
+
 /* PairFrontier.reduce: group labels from pair labels (1 inner, -1 outer, 0 undecided,
- * 2 dropped), in three passes; cnt, n_in, n_out, n_live, n_split, first_in, first_any,
- * first_und: G int64 each, zeroed (first_*: N) by the caller */
+ * 2 dropped), in three passes, and per pair whether its cell can be split (u_can: widest
+ * relative control width above u_eps); cnt, n_in, n_out, n_live, n_split, first_in,
+ * first_any, first_und: G int64 each, zeroed (first_*: N) by the caller */
 void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char *lab,
-                      const unsigned char *u_can, const unsigned char *x_small_pair,
+                      int64_t d, int64_t n, const double *lo, const double *hi,
+                      const double *x_scale, const double *u_scale, double eps,
+                      double u_eps, unsigned char *u_can,
                       int64_t max_cells, int64_t *cnt, int64_t *n_in, int64_t *n_out,
                       int64_t *n_live, int64_t *n_split, int64_t *first_in,
                       int64_t *first_any, int64_t *first_und, unsigned char *gflag,
@@ -545,11 +569,15 @@ void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char 
     /* gflag bits: 1 inner, 2 outer, 4 u_ok, 8 x_small, 16 exhausted */
     for (int64_t i = 0; i < N; ++i) {
         int64_t k = g[i];
+        double wx, wu = 0.0;
+        (void)pair_widest(lo + i * d, hi + i * d, x_scale, n, &wx);
+        if (d > n) (void)pair_widest(lo + i * d + n, hi + i * d + n, u_scale, d - n, &wu);
+        u_can[i] = (unsigned char)(d > n && wu > u_eps);
         cnt[k] += 1;
         if (lab[i] == 1) { n_in[k] += 1; if (first_in[k] == N) first_in[k] = i; }
         if (lab[i] == -1) n_out[k] += 1;
         if (first_any[k] == N) first_any[k] = i;
-        gflag[k] = (unsigned char)((gflag[k] & ~8) | (x_small_pair[i] ? 8 : 0)); /* last wins */
+        gflag[k] = (unsigned char)((gflag[k] & ~8) | (wx <= eps ? 8 : 0)); /* last wins */
     }
     for (int64_t k = 0; k < G; ++k) {
         if (n_in[k] > 0) gflag[k] |= 1;
@@ -580,6 +608,127 @@ void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char 
         u_mode[i] = (unsigned char)((f & 4) != 0);
     }
 }
+
+/* the cut of [a, b] at r (mid: 0.5 a + 0.5 b): cmpc_bisect's rule; returns a < c < b */
+static int pair_cut(double a, double b, double r, int mid, double *c)
+{
+    double x = mid ? 0.5 * a + 0.5 * b : a + r * (b - a);
+    int good = (a < x) && (x < b);
+    if (!good) {
+        x = (1.0 - r) * a + r * b;
+        good = (a < x) && (x < b);
+    }
+    if (!good) {
+        x = nextafter(a, INFINITY);
+        good = (a < x) && (x < b);
+    }
+    *c = x;
+    return good;
+}
+
+/* PairFrontier.split of the pairs sel (M indices, increasing) of a frontier (N pairs of d
+ * coordinates, n of them the state): children (at most 2 M rows) and stuck state boxes (at
+ * most M rows), with the source pair of each row (its data) and its group. Scratch: G
+ * groups (ids < G): first (int64, set to -1), glo/ghi (G d, set to +inf / -inf), gk (int64),
+ * gc (double), gok (uint8, zeroed), rank (int64, zeroed); per selected pair: pk (int64),
+ * pc (double), pok (uint8). counts: n_uok, n_keep1, n_keep2, G2_ok, n_stuck, n_present_u. */
+void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
+                     const double *lo, const double *hi, const int64_t *g,
+                     const unsigned char *mode, const unsigned char *can,
+                     const double *u_scale, const double *x_scale, double x_ratio,
+                     int64_t G, int64_t *first, double *glo, double *ghi, int64_t *gk,
+                     double *gc, unsigned char *gok, int64_t *rank,
+                     int64_t *pk, double *pc, unsigned char *pok,
+                     double *clo, double *chi, int64_t *csrc, int64_t *cgrp,
+                     double *slo, double *shi, int64_t *ssrc, int64_t *sgrp, int64_t *counts)
+{
+    const int64_t m = d - n;
+    int64_t n_uok = 0, n_keep1 = 0, n_keep2 = 0, g2 = 0, n_stuck = 0, base = -1;
+    for (int64_t t = 0; t < M; ++t) {
+        const int64_t i = sel[t], k = g[i];
+        const double *l = lo + i * d, *h = hi + i * d;
+        if (k > base) base = k;
+        if (mode[i]) {
+            if (can[i]) {
+                double wu;
+                const int64_t j = n + pair_widest(l + n, h + n, u_scale, m, &wu);
+                pk[t] = j;
+                pok[t] = (unsigned char)pair_cut(l[j], h[j], 0.5, 1, pc + t);
+                if (pok[t]) n_uok++; else n_keep2++;
+            } else {
+                n_keep1++;
+            }
+        } else {
+            double *a = glo + k * d, *b = ghi + k * d;
+            if (first[k] < 0) first[k] = i;
+            for (int64_t j = 0; j < d; ++j) {  /* numpy.minimum / maximum: NaN propagates */
+                a[j] = (l[j] < a[j] || l[j] != l[j]) ? l[j] : a[j];
+                b[j] = (h[j] > b[j] || h[j] != h[j]) ? h[j] : b[j];
+            }
+        }
+    }
+    for (int64_t k = 0; k < G; ++k) {
+        if (first[k] < 0) continue;
+        double wx;
+        gk[k] = pair_widest(glo + k * d, ghi + k * d, x_scale, n, &wx);
+        gok[k] = (unsigned char)pair_cut(glo[k * d + gk[k]], ghi[k * d + gk[k]], x_ratio,
+                                         x_ratio == 0.5, gc + k);
+        if (gok[k]) g2++; else n_stuck++;
+    }
+    /* rows: u left halves, u right halves, keep (cells not split), keep (cut failed), state
+     * left halves, state right halves */
+    int64_t r_left = 0, r_right = n_uok, r_k1 = 2 * n_uok, r_k2 = 2 * n_uok + n_keep1;
+    for (int64_t t = 0; t < M; ++t) {
+        const int64_t i = sel[t];
+        if (!mode[i]) continue;
+        const double *l = lo + i * d, *h = hi + i * d;
+        rank[g[i]] = 1;
+        if (can[i] && pok[t]) {
+            double *l1 = clo + r_left * d, *h1 = chi + r_left * d;
+            double *l2 = clo + r_right * d, *h2 = chi + r_right * d;
+            for (int64_t j = 0; j < d; ++j) { l1[j] = l2[j] = l[j]; h1[j] = h2[j] = h[j]; }
+            h1[pk[t]] = pc[t];
+            l2[pk[t]] = pc[t];
+            csrc[r_left] = csrc[r_right] = i;
+            cgrp[r_left++] = cgrp[r_right++] = g[i];
+        } else {
+            int64_t r = can[i] ? r_k2++ : r_k1++;
+            for (int64_t j = 0; j < d; ++j) { clo[r * d + j] = l[j]; chi[r * d + j] = h[j]; }
+            csrc[r] = i;
+            cgrp[r] = g[i];
+        }
+    }
+    int64_t n_u = 2 * n_uok + n_keep1 + n_keep2, n_pu = 0;
+    for (int64_t k = 0; k < G; ++k) {  /* dense ids: the cell-splitting groups first */
+        int64_t present = rank[k];
+        rank[k] = n_pu;
+        n_pu += present;
+    }
+    for (int64_t r = 0; r < n_u; ++r) cgrp[r] = rank[cgrp[r]];
+    int64_t xl = n_u, xr = n_u + g2, q = 0, s = 0;
+    for (int64_t k = 0; k < G; ++k) {
+        if (first[k] < 0) continue;
+        const double *a = glo + k * d, *b = ghi + k * d;
+        if (gok[k]) {
+            double *l1 = clo + xl * d, *h1 = chi + xl * d;
+            double *l2 = clo + xr * d, *h2 = chi + xr * d;
+            for (int64_t j = 0; j < d; ++j) { l1[j] = l2[j] = a[j]; h1[j] = h2[j] = b[j]; }
+            h1[gk[k]] = gc[k];
+            l2[gk[k]] = gc[k];
+            csrc[xl] = csrc[xr] = first[k];
+            cgrp[xl++] = n_pu + q;
+            cgrp[xr++] = n_pu + g2 + q;
+            q++;
+        } else {
+            for (int64_t j = 0; j < d; ++j) { slo[s * d + j] = a[j]; shi[s * d + j] = b[j]; }
+            ssrc[s] = first[k];
+            sgrp[s++] = k;
+        }
+    }
+    counts[0] = n_uok; counts[1] = n_keep1; counts[2] = n_keep2; counts[3] = g2;
+    counts[4] = n_stuck; counts[5] = n_pu;
+    (void)base;
+}
 """
 _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
 
@@ -587,8 +736,11 @@ _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
 _I64, _PTR = ctypes.c_int64, ctypes.c_void_p
 _GROUP_ARGS = {"cmpc_group_first": [_I64, _PTR, _PTR, _PTR],
                "cmpc_group_hull": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR],
-               "cmpc_pair_reduce": [_I64, _I64, _PTR, _PTR, _PTR, _PTR, _I64]
-               + [_PTR] * 12}
+               "cmpc_pair_reduce": [_I64, _I64, _PTR, _PTR, _I64, _I64, _PTR, _PTR, _PTR,
+                                    _PTR, ctypes.c_double, ctypes.c_double, _PTR, _I64]
+               + [_PTR] * 12,
+               "cmpc_pair_split": [_I64, _PTR, _I64, _I64, _PTR, _PTR, _PTR, _PTR, _PTR,
+                                   _PTR, _PTR, ctypes.c_double, _I64] + [_PTR] * 19}
 
 
 def _group_kernel(name: str, wait: bool = False) -> Any:
@@ -844,9 +996,8 @@ class PairFrontier:
         fn = _group_kernel("cmpc_pair_reduce")
         if fn is None:
             return None
-        N = len(self)
-        self._u_can = u_can = self._u_splittable()
-        x_small = self.width() <= eps
+        N, n, d = len(self), self.n, self.lo.shape[1]
+        u_can = np.empty(N, dtype=bool)
         cnt = np.zeros((5, G), dtype=np.int64)  # cnt, n_in, n_out, n_live, n_split
         first = np.full((3, G), N, dtype=np.int64)  # first inner, first pair, first undecided
         gflag = np.zeros(G, dtype=np.uint8)
@@ -856,11 +1007,15 @@ class PairFrontier:
         a = address
         c0 = a(cnt)
         f0 = a(first)
+        lo = np.ascontiguousarray(self.lo, dtype=np.float64)
+        hi = np.ascontiguousarray(self.hi, dtype=np.float64)
+        xs = np.ascontiguousarray(np.broadcast_to(self.x_scale, (n,)), dtype=np.float64)
+        us = np.ascontiguousarray(self.u_scale, dtype=np.float64) if d > n else xs
         fn(N, G, a(np.ascontiguousarray(self.group, dtype=np.int64)),
-           a(np.ascontiguousarray(labels, dtype=np.int8)), a(u_can), a(x_small),
-           self.max_cells, c0, c0 + 8 * G, c0 + 16 * G, c0 + 24 * G, c0 + 32 * G,
+           a(np.ascontiguousarray(labels, dtype=np.int8)), d, n, a(lo), a(hi), a(xs), a(us),
+           float(eps), float(self.u_eps), a(u_can), self.max_cells, c0, c0 + 8 * G, c0 + 16 * G, c0 + 24 * G, c0 + 32 * G,
            f0, f0 + 8 * G, f0 + 16 * G, a(gflag), a(out), a(small), a(mode))
-        self._u_mode = mode
+        self._u_mode, self._u_can = mode, u_can
         return out, small
 
     def split(self) -> tuple[PairFrontier, PairFrontier]:
@@ -925,6 +1080,79 @@ class PairFrontier:
         # dense group ids keep the per-group arrays of reduce small
         if len(children):
             children.group = _dense_ids(children.group)[1]
+        return children, stuck
+
+    def split_selected(self, idx: np.ndarray) -> tuple[PairFrontier, PairFrontier]:
+        """``self.take(idx).split()`` for increasing indices ``idx`` (the pairs that grow):
+        the same children and stuck boxes, in the same order, by one C pass over the
+        selected pairs where it is available (numpy otherwise)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        fn = _group_kernel("cmpc_pair_split") if idx.size >= _GROUP_MIN else None
+        if fn is None or (self.restart is not None and (
+                self.data is None or not set(self.restart) <= set(self.data))):
+            return self.take(idx).split()
+        n, d = self.n, self.lo.shape[1]
+        mode, can = self._u_mode, self._u_can
+        if can is None:
+            can = self._u_splittable()
+        if mode is None:
+            mode_g = np.zeros(int(self.group.max()) + 1, dtype=bool)
+            sg = self.group.take(idx)
+            mode_g[sg[can.take(idx)]] = True  # (a group splits its cells if one of the
+            mode = mode_g[self.group]          # selected pairs can)
+        M = idx.size
+        g = np.ascontiguousarray(self.group, dtype=np.int64)
+        G = int(g.take(idx).max()) + 1
+        first = np.full(G, -1, dtype=np.int64)
+        glo = np.full((G, d), np.inf)
+        ghi = np.full((G, d), -np.inf)
+        gk = np.empty(G, dtype=np.int64)
+        gc = np.empty(G)
+        gok = np.zeros(G, dtype=np.uint8)
+        rank = np.zeros(G, dtype=np.int64)
+        pk = np.empty(M, dtype=np.int64)
+        pc = np.empty(M)
+        pok = np.zeros(M, dtype=np.uint8)
+        clo = np.empty((2 * M, d))
+        chi = np.empty((2 * M, d))
+        csrc = np.empty(2 * M, dtype=np.int64)
+        cgrp = np.empty(2 * M, dtype=np.int64)
+        slo = np.empty((M, d))
+        shi = np.empty((M, d))
+        ssrc = np.empty(M, dtype=np.int64)
+        sgrp = np.empty(M, dtype=np.int64)
+        counts = np.zeros(6, dtype=np.int64)
+        us = np.ascontiguousarray(self.u_scale, dtype=np.float64) if self.m else np.ones(1)
+        xs = np.ascontiguousarray(np.broadcast_to(self.x_scale, (n,)), dtype=np.float64)
+        a = address
+        lo = np.ascontiguousarray(self.lo, dtype=np.float64)
+        hi = np.ascontiguousarray(self.hi, dtype=np.float64)
+        fn(M, a(np.ascontiguousarray(idx, dtype=np.int64)), d, n, a(lo), a(hi), a(g),
+           a(np.ascontiguousarray(mode, dtype=bool)), a(np.ascontiguousarray(can, dtype=bool)),
+           a(us), a(xs), float(self.split_ratio), G, a(first), a(glo), a(ghi), a(gk), a(gc),
+           a(gok), a(rank), a(pk), a(pc), a(pok), a(clo), a(chi), a(csrc), a(cgrp), a(slo),
+           a(shi), a(ssrc), a(sgrp), a(counts))
+        n_uok, n_keep1, n_keep2, g2, n_stuck, _ = (int(v) for v in counts)
+        n_u = 2 * n_uok + n_keep1 + n_keep2
+        nc = n_u + 2 * g2
+        src = csrc[:nc]
+        data = None if self.data is None else {
+            key: v.take(src, axis=0) for key, v in self.data.items()}
+        c_lo, c_hi = clo[:nc], chi[:nc]
+        s_lo, s_hi, s_src = slo[:n_stuck], shi[:n_stuck], ssrc[:n_stuck]
+        s_data = None if self.data is None else {
+            key: v.take(s_src, axis=0) for key, v in self.data.items()}
+        if self.restart is not None:  # the nested search starts again from U
+            for L, H_, D, rows in ((c_lo, c_hi, data, slice(n_u, nc)),
+                                   (s_lo, s_hi, s_data, slice(0, n_stuck))):
+                L[rows, n:] = self.u_box[:, 0]
+                H_[rows, n:] = self.u_box[:, 1]
+            for key, v in self.restart.items():  # (data holds every restart key)
+                v = np.asarray(v)
+                data[key] = np.concatenate([data[key][:n_u], np.repeat(v, 2 * g2, axis=0)])
+                s_data[key] = np.repeat(v, n_stuck, axis=0)
+        children = self._with(c_lo, c_hi, cgrp[:nc].astype(np.intp, copy=False), data)
+        stuck = self._with(s_lo, s_hi, sgrp[:n_stuck].astype(np.intp, copy=False), s_data)
         return children, stuck
 
     def _halves(self, k: np.ndarray, ratio: float

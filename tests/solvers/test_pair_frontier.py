@@ -251,3 +251,64 @@ def test_reduce_in_c_equals_numpy(seed, N, G, n, m, max_cells, eps, sorted_group
     assert got is not None
     assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
     assert np.array_equal(a._u_mode, b._u_mode) and np.array_equal(a._u_can, b._u_can)
+
+
+def _same_frontier(A, B) -> bool:
+    if A.lo.shape != B.lo.shape or A.group.dtype != B.group.dtype:
+        return False
+    if not (np.array_equal(A.lo, B.lo) and np.array_equal(A.hi, B.hi)
+            and np.array_equal(A.group, B.group)):
+        return False
+    if (A.data is None) != (B.data is None):
+        return False
+    return A.data is None or (set(A.data) == set(B.data) and all(
+        np.array_equal(A.data[k], B.data[k]) and A.data[k].dtype == B.data[k].dtype
+        for k in A.data))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), N=st.integers(64, 300), G=st.integers(1, 40),
+       n=st.integers(1, 3), m=st.integers(0, 2), max_cells=st.integers(1, 8),
+       ratio=st.sampled_from([0.5, float(np.float32(0.49))]), reduced=st.booleans(),
+       restart=st.booleans(), with_data=st.booleans(),
+       mag=st.sampled_from([1.0, 1e-3, 1e3, 1e-310, 1e307]))
+def test_split_of_selected_pairs_in_c_equals_take_then_split(seed, N, G, n, m, max_cells,
+                                                              ratio, reduced, restart,
+                                                              with_data, mag):
+    """``split_selected(idx)`` (one C pass) gives ``take(idx).split()``: the same children
+    and stuck boxes in the same order, group ids and data (also with a restarted nested
+    search, zero-width and subnormal-width coordinates, subnormal and huge bounds where
+    halving rounds or sums overflow, and split modes computed by reduce or not)."""
+    from casadi_cmpc.interval._native import native_available
+    from casadi_cmpc.solvers import engine as E
+
+    if not native_available():
+        return
+    assert E._group_kernel("cmpc_pair_split", wait=True) is not None
+    rng = np.random.default_rng(seed)
+    g = rng.integers(0, G, N)
+    xlo = rng.uniform(-1, 1, (G, n)) * 10.0 ** rng.integers(-3, 3)
+    xw = rng.choice([0.0, 1e-300, 0.01, 0.1, 0.5], (G, n))
+    ulo = rng.uniform(-1, 0, (N, m))
+    uw = rng.choice([0.0, 5e-324, 0.025, 0.05, 0.5], (N, m))
+    with np.errstate(over="ignore"):  # bounds beyond the largest float become infinite
+        lo = np.ascontiguousarray(np.concatenate([xlo[g], ulo], axis=1)) * mag
+        hi = np.ascontiguousarray(np.concatenate([xlo[g] + xw[g], ulo + uw], axis=1)) * mag
+    data = {"witness": rng.normal(size=(N, max(m, 1))),
+            "tag": rng.integers(0, 5, N).astype(np.int16)} if with_data else None
+    rs = {"tag": np.array([7], dtype=np.int16)} if restart and with_data else None
+    x_scale = rng.uniform(0.5, 2.0, n)
+
+    def frontier():
+        return PairFrontier(lo, hi, g.astype(np.intp), n, x_scale, np.ones(m), 0.05,
+                            max_cells, ratio, data, np.tile([-1.0, 1.0], (m, 1)), rs)
+
+    A, B = frontier(), frontier()
+    if reduced:
+        labels = rng.choice(np.array([INNER, OUTER, UNDECIDED], dtype=np.int8), N)
+        A.reduce(labels, 0.05)
+        B._u_mode, B._u_can = A._u_mode.copy(), A._u_can.copy()
+    sel = np.flatnonzero(rng.random(N) < rng.uniform(0.3, 1.0))
+    c1, s1 = A.split_selected(sel)
+    c2, s2 = B.take(sel).split()
+    assert _same_frontier(c1, c2) and _same_frontier(s1, s2)
