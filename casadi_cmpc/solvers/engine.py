@@ -1013,8 +1013,8 @@ class PairFrontier:
         us = np.ascontiguousarray(self.u_scale, dtype=np.float64) if d > n else xs
         fn(N, G, a(np.ascontiguousarray(self.group, dtype=np.int64)),
            a(np.ascontiguousarray(labels, dtype=np.int8)), d, n, a(lo), a(hi), a(xs), a(us),
-           float(eps), float(self.u_eps), a(u_can), self.max_cells, c0, c0 + 8 * G, c0 + 16 * G, c0 + 24 * G, c0 + 32 * G,
-           f0, f0 + 8 * G, f0 + 16 * G, a(gflag), a(out), a(small), a(mode))
+           float(eps), float(self.u_eps), a(u_can), self.max_cells, c0, c0 + 8 * G,
+           c0 + 16 * G, c0 + 24 * G, c0 + 32 * G, f0, f0 + 8 * G, f0 + 16 * G, a(gflag), a(out), a(small), a(mode))
         self._u_mode, self._u_can = mode, u_can
         return out, small
 
@@ -1143,8 +1143,7 @@ class PairFrontier:
         s_data = None if self.data is None else {
             key: v.take(s_src, axis=0) for key, v in self.data.items()}
         if self.restart is not None:  # the nested search starts again from U
-            for L, H_, D, rows in ((c_lo, c_hi, data, slice(n_u, nc)),
-                                   (s_lo, s_hi, s_data, slice(0, n_stuck))):
+            for L, H_, rows in ((c_lo, c_hi, slice(n_u, nc)), (s_lo, s_hi, slice(0, n_stuck))):
                 L[rows, n:] = self.u_box[:, 0]
                 H_[rows, n:] = self.u_box[:, 1]
             for key, v in self.restart.items():  # (data holds every restart key)
