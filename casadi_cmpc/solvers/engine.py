@@ -1014,7 +1014,8 @@ class PairFrontier:
         fn(N, G, a(np.ascontiguousarray(self.group, dtype=np.int64)),
            a(np.ascontiguousarray(labels, dtype=np.int8)), d, n, a(lo), a(hi), a(xs), a(us),
            float(eps), float(self.u_eps), a(u_can), self.max_cells, c0, c0 + 8 * G,
-           c0 + 16 * G, c0 + 24 * G, c0 + 32 * G, f0, f0 + 8 * G, f0 + 16 * G, a(gflag), a(out), a(small), a(mode))
+           c0 + 16 * G, c0 + 24 * G, c0 + 32 * G, f0, f0 + 8 * G, f0 + 16 * G, a(gflag),
+           a(out), a(small), a(mode))
         self._u_mode, self._u_can = mode, u_can
         return out, small
 
