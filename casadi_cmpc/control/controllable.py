@@ -202,12 +202,17 @@ class _Target:
             und = np.flatnonzero(~ok)
             if und.size:
                 Yu = Y[und]
-                fin = np.isfinite(Yu).all(axis=(1, 2))
-                got = np.zeros(und.size, dtype=bool)
-                if self.boxes is not None:
-                    got |= self.boxes.contains_box(Yu, view="inner") & fin
-                for Z in self.zonos:
-                    got |= np.asarray(Z.contains_box(Yu), dtype=bool) & fin
+                grid = None if self.boxes is None else self.boxes._grid("inner", und.size)
+                if grid is not None and not self.zonos:
+                    # the exact grid index answers False for a non-finite (or NaN) enclosure
+                    got = grid.contains(Yu)
+                else:
+                    fin = np.isfinite(Yu).all(axis=(1, 2))
+                    got = np.zeros(und.size, dtype=bool)
+                    if self.boxes is not None:
+                        got |= self.boxes.contains_box(Yu, view="inner") & fin
+                    for Z in self.zonos:
+                        got |= np.asarray(Z.contains_box(Yu), dtype=bool) & fin
                 ok[und[got]] = True
         return ok
 
@@ -222,11 +227,16 @@ class _Target:
         if Y is not None and out.any():
             idx = np.flatnonzero(out)
             Yi = Y[idx]
-            meet = ~np.isfinite(Yi).all(axis=(1, 2))
-            if self.boxes is not None:
-                meet |= self.boxes.intersects_box(np.nan_to_num(Yi), view="inner")
-            for Z in self.zonos:
-                meet |= np.asarray(Z.intersects_box(np.nan_to_num(Yi)), dtype=bool)
+            grid = None if self.boxes is None else self.boxes._grid("inner", idx.size)
+            if grid is not None and not self.zonos:
+                # the exact grid index answers True for a non-finite (or NaN) enclosure
+                meet = grid.intersects(Yi)
+            else:
+                meet = ~np.isfinite(Yi).all(axis=(1, 2))
+                if self.boxes is not None:
+                    meet |= self.boxes.intersects_box(np.nan_to_num(Yi), view="inner")
+                for Z in self.zonos:
+                    meet |= np.asarray(Z.intersects_box(np.nan_to_num(Yi)), dtype=bool)
             out[idx[meet]] = False
         return out
 
