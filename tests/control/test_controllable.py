@@ -732,3 +732,35 @@ def test_target_rows_up_to_sign_describe_the_same_polytope():
         assert (want == got).all()
 
     check()
+
+
+def test_box_union_target_tests_on_undefined_and_infinite_enclosures():
+    """The target tests of a box union (through its exact grid index) on enclosures with
+    NaN (possibly undefined) or infinite bounds: never inside, never proven outside; on
+    finite enclosures the exact answers of the union's own contains / intersects tests."""
+    from casadi_cmpc.control.controllable import _Target
+
+    x = ca.SX.sym("x", 2)
+    u = ca.SX.sym("u")
+    m = cm.Model(x=x, u=u, f=ca.vertcat(x[0] + u, x[1]), X=cm.Box([-1, -1], [1, 1]),
+                 U=cm.Box([-1], [1]))
+    k = np.arange(10) / 10.0
+    lo = np.stack(np.meshgrid(k, k, indexing="ij"), -1).reshape(-1, 2)
+    lo = lo[(lo.sum(axis=1) < 1.0)]  # a staircase of 55 cells: more than one box needed
+    P = cm.Paving(inner=np.stack([lo, lo + 0.1], -1))
+    T = _Target(m, P)
+    rng = np.random.default_rng(3)
+    c = rng.uniform(-0.2, 1.2, (300, 2))
+    Y = np.stack([c - 0.03, c + 0.03], -1)
+    Y[:40, 0, 0] = np.nan
+    Y[40:60, 1, 1] = np.inf
+    Y[60:70, 0, :] = -np.inf
+    Y[70:80] = np.nan
+    bad = ~np.isfinite(Y).all(axis=(1, 2))
+    inside = T.inside_of([], Y)
+    outside = T.outside_of([], Y)
+    assert not inside[bad].any() and not outside[bad].any()
+    fin = ~bad
+    assert np.array_equal(inside[fin], P.contains_box(Y[fin], view="inner"))
+    assert np.array_equal(outside[fin], ~P.intersects_box(Y[fin], view="inner"))
+    assert inside[fin].any() and outside[fin].any() and not (inside & outside).any()
