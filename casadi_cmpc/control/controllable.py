@@ -23,6 +23,7 @@ import numpy as np
 from .._interrupt import InterruptScope
 from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
+from ..interval._native import Rows
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets._boxunion import _compact_union
@@ -299,12 +300,14 @@ class _OneStepClassifier:
         labels = np.zeros(N, dtype=np.int8)
         if N == 0:
             return labels
-        X, C = fr.x_boxes, fr.u_cells
+        lo, hi, n = fr.lo, fr.hi, fr.n
         blocked = np.zeros(N, dtype=bool)
         buried = np.zeros(N, dtype=bool)
-        for ob in self.obstacles:
-            blocked |= np.asarray(ob.intersects_box(X), dtype=bool)
-            buried |= np.asarray(ob.contains_box(X), dtype=bool)
+        if self.obstacles:
+            X = fr.x_boxes
+            for ob in self.obstacles:
+                blocked |= np.asarray(ob.intersects_box(X), dtype=bool)
+                buried |= np.asarray(ob.contains_box(X), dtype=bool)
         # the target's test functions on the pairs with each point w_c of W (exclusion),
         # then on the boxes of the cells that may still be useful with the cell midpoint
         # over all of W (inclusion)
@@ -316,21 +319,24 @@ class _OneStepClassifier:
             return labels
         wp = self.w_points
         nc, K = wp.shape[0], und.size
-        Xu, Cu = (X, C) if K == N else (X[und], C[und])
+        # the kernels read the state boxes and cells in place from the frontier's bounds
+        # (rows und, nc times over: one copy of the boxes per point of W)
+        rows = None if K == N else und
         if nc == 1:
-            Xs, Us, Ws = Xu, Cu, np.stack([wp, wp], axis=-1)  # (1, l, 2): broadcast
+            Ws: Any = np.stack([wp, wp], axis=-1)  # (1, l, 2): broadcast
         else:
-            Xs, Us = np.tile(Xu, (nc, 1, 1)), np.tile(Cu, (nc, 1, 1))
-            Ws = np.repeat(np.stack([wp, wp], axis=-1), K, axis=0)  # (nc K, l, 2)
-        out = T.outside_of(*T.images(Xs, Us, Ws))
+            rows = np.tile(np.arange(N) if rows is None else rows, nc)
+            Ws = Rows(wp, wp, idx=np.repeat(np.arange(nc), K))  # (nc K, l, 2)
+        out = T.outside_of(*T.images(Rows(lo, hi, 0, n, rows), Rows(lo, hi, n, None, rows), Ws))
         useless = buried.copy()
         useless[und] = out.reshape(nc, K).any(axis=0)
         labels[useless] = OUTER
         cand = cand[~useless[cand]]
         if cand.size:
-            lo, hi = C[cand, :, 0], C[cand, :, 1]
-            mid = np.clip(0.5 * lo + 0.5 * hi, lo, hi)
-            ok = T.inside_of(*T.images(X[cand], np.stack([mid, mid], axis=-1), self.W))
+            cl, ch = lo[cand, n:], hi[cand, n:]
+            mid = np.clip(0.5 * cl + 0.5 * ch, cl, ch)
+            ok = T.inside_of(*T.images(Rows(lo, hi, 0, n, None if cand.size == N else cand),
+                                       Rows(mid, mid), self.W))
             labels[cand[ok]] = INNER
             fr.data["witness"][cand[ok]] = mid[ok]
         return labels

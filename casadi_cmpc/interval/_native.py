@@ -262,8 +262,11 @@ def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[
     ``size_in[i] == 0``: input ``i`` is not read. ``n_extra_out`` outputs follow, of the
     sizes of ``size_out`` again."""
     sizes = list(size_out) * (1 + n_extra_out)
-    L = ["void cmpc_batch(long n, const double *const *in, const long *st, "
-         "double *const *out) {",
+    L = ["/* input i: lower bounds in[2 i], upper bounds in[2 i + 1], row stride st[2 i] and",
+         " * coordinate stride st[2 i + 1] (doubles), box b on row ix[i][b] (b where ix[i] is",
+         " * NULL): interleaved (N, d, 2) arrays, separate bound arrays and gathered rows */",
+         "void cmpc_batch(long n, const double *const *in, const long *st, "
+         "const long *const *ix, double *const *out) {",
          "    long b0, l, k;",
          "    CIV_ENV_ENTER;",
          "    for (b0 = 0; b0 < n; b0 += CMPC_L) {",
@@ -277,8 +280,13 @@ def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[
     L.append("            long bb = b0 + l;")
     for i, d in enumerate(size_in):
         if d:
-            L += [f"            const double *P{i} = in[{i}] + bb * st[{i}];",
-                  f"            for (k = 0; k < {2 * d}; ++k) B{i}[k][l] = P{i}[k];"]
+            L += [f"            const long r{i} = (ix[{i}] ? ix[{i}][bb] : bb) * st[{2 * i}];",
+                  f"            const double *L{i} = in[{2 * i}] + r{i}, "
+                  f"*H{i} = in[{2 * i + 1}] + r{i};",
+                  f"            for (k = 0; k < {d}; ++k) {{",
+                  f"                B{i}[2 * k][l] = L{i}[k * st[{2 * i + 1}]];",
+                  f"                B{i}[2 * k + 1][l] = H{i}[k * st[{2 * i + 1}]];",
+                  "            }"]
     L += ["        }",
           "        #pragma omp simd",
           "        for (l = 0; l < m; ++l) {",
@@ -289,8 +297,8 @@ def _block_loop(size_in: Sequence[int], size_out: Sequence[int], body: Sequence[
         if d:
             L += [f"            double *O{o} = out[{o}] + (b0 + l) * {2 * d};",
                   f"            for (k = 0; k < {2 * d}; ++k) O{o}[k] = Q{o}[k][l];"]
-    L += ["        }", "    }", "    CIV_ENV_LEAVE;", "    (void)in; (void)st; (void)out; (void)k;",
-          "}", ""]
+    L += ["        }", "    }", "    CIV_ENV_LEAVE;",
+          "    (void)in; (void)st; (void)ix; (void)out; (void)k;", "}", ""]
     return "\n".join(L)
 
 
@@ -578,30 +586,88 @@ def load_kernel(src: str, size_in: Sequence[int], size_out: Sequence[int],
     thread (a large function takes seconds to tens of seconds) and :data:`PENDING` is
     returned until it is there; the caller evaluates with numpy meanwhile."""
     fn = load_symbol(src, "cmpc_batch",
-                     [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p],
-                     wait=wait)
+                     [ctypes.c_long, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                      ctypes.c_void_p], wait=wait)
     if not fn:
         return fn
     n_in = len(size_in)
     sizes = list(size_out)
-    widths = [2 * int(d) for d in size_in]
-    ptr_in = ctypes.c_void_p * max(n_in, 1)
+    ptr_in = ctypes.c_void_p * max(2 * n_in, 1)
+    ptr_ix = ctypes.c_void_p * max(n_in, 1)
     ptr_out = ctypes.c_void_p * max(len(sizes), 1)
-    strides: dict[tuple[bool, ...], Any] = {}  # broadcast pattern -> strides (C longs)
+    strides: dict[tuple[int, ...], Any] = {}  # stride values -> C longs
     f64 = np.dtype(np.float64)
 
-    def run(boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
-        ins = [b if b.dtype == f64 and b.flags.c_contiguous else
-               np.ascontiguousarray(b, dtype=np.float64) for b in boxes]
-        pattern = tuple(b.shape[0] == 1 for b in ins)
-        st = strides.get(pattern)
+    def run(boxes: Sequence[Any], n: int) -> list[np.ndarray]:
+        ptrs: list[int | None] = []
+        st_vals: list[int] = []
+        ixs: list[int | None] = []
+        keep: list[Any] = []  # arrays whose addresses are passed, alive until the call
+        for b in boxes:
+            if isinstance(b, Rows):
+                lo, hi, idx = b.lo, b.hi, b.idx
+                one = b.shape[0] == 1
+                row = 0 if not one or idx is None else int(idx[0])
+                off = 8 * (b.start + row * lo.shape[1])
+                ptrs += [address(lo) + off, address(hi) + off]
+                st_vals += [0 if one else lo.shape[1], 1]
+                ixs.append(None if one or idx is None else address(idx))
+                continue
+            if b.dtype != f64 or b.ndim != 3 or any(v % 8 for v in b.strides):
+                b = np.ascontiguousarray(b, dtype=np.float64)
+            keep.append(b)
+            a = address(b)
+            ptrs += [a, a + b.strides[2]]
+            st_vals += [0 if b.shape[0] == 1 else b.strides[0] // 8, b.strides[1] // 8]
+            ixs.append(None)
+        key = tuple(st_vals)
+        st = strides.get(key)
         if st is None:
-            st = strides[pattern] = (ctypes.c_long * max(n_in, 1))(
-                *[0 if one else w for one, w in zip(pattern, widths, strict=True)])
+            st = strides[key] = (ctypes.c_long * max(2 * n_in, 1))(*st_vals)
         outs = [np.zeros((n, d, 2)) for d in sizes]
-        pin = ptr_in(*[address(b) for b in ins])
         pout = ptr_out(*[address(o) for o in outs])
-        fn(n, pin, st, pout)
+        fn(n, ptr_in(*ptrs), st, ptr_ix(*ixs), pout)
         return outs
 
     return run
+
+
+class Rows:
+    """A batch of boxes read in place from bound arrays by the native kernels (no copy into
+    an ``(N, d, 2)`` array): box ``b`` is ``[lo[r, start:stop], hi[r, start:stop]]`` with
+    ``r = idx[b]`` (``r = b`` without ``idx``). ``lo``, ``hi``: C-contiguous float64 arrays
+    of shape (R, D) (the same array for thin boxes); ``idx``: int64 row indices. A batch of
+    one row (``shape[0] == 1``) is broadcast like an ``(1, d, 2)`` array. Other evaluators
+    take :meth:`boxes`."""
+
+    __slots__ = ("lo", "hi", "start", "stop", "idx")
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, start: int = 0,
+                 stop: int | None = None, idx: np.ndarray | None = None) -> None:
+        self.lo = np.ascontiguousarray(lo, dtype=np.float64)
+        self.hi = self.lo if hi is lo else np.ascontiguousarray(hi, dtype=np.float64)
+        if self.lo.ndim != 2 or self.lo.shape != self.hi.shape:
+            raise ValueError("Rows: lo and hi must be 2-D arrays of one shape")
+        self.start = int(start)
+        self.stop = self.lo.shape[1] if stop is None else int(stop)
+        if not 0 <= self.start <= self.stop <= self.lo.shape[1]:
+            raise ValueError("Rows: the column range lies outside the arrays")
+        self.idx = None if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        n = self.lo.shape[0] if self.idx is None else self.idx.shape[0]
+        return (n, self.stop - self.start, 2)
+
+    def boxes(self) -> np.ndarray:
+        """The boxes as an ``(N, d, 2)`` array."""
+        lo = self.lo[:, self.start:self.stop]
+        hi = self.hi[:, self.start:self.stop]
+        if self.idx is not None:
+            lo, hi = lo.take(self.idx, axis=0), hi.take(self.idx, axis=0)
+        return np.stack([lo, hi], axis=-1)
+
+
+def as_arrays(boxes: Sequence[Any]) -> list[np.ndarray]:
+    """The inputs of a kernel call as ``(N_i, d_i, 2)`` arrays (:class:`Rows` gathered)."""
+    return [b.boxes() if isinstance(b, Rows) else b for b in boxes]

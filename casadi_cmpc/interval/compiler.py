@@ -1164,7 +1164,9 @@ class InclusionFunction:
         """Evaluate on already validated ``(N_i, d_i, 2)`` float arrays (N_i in {1, n}).
 
         For solvers that build their own box batches; no shape or NaN checks are made. The
-        backend is chosen as for a call (see the class Notes).
+        backend is chosen as for a call (see the class Notes). An input may also be a
+        :class:`~._native.Rows` (rows of bound arrays): the native kernels read it in place,
+        the other evaluators after gathering it.
         """
         small = 0 < n <= self._scalar_limit()
         if small:
@@ -1177,10 +1179,14 @@ class InclusionFunction:
             go = bool(n) and self._wants_native(n)
         if go:
             if not self._is_natural:
-                return self._numpy(boxes, n)  # the centered form takes its native kernel
+                native = self._centered_native()
+                if native is not None and native[0] == "fused":
+                    return native[1](boxes, n)  # the whole centered form in one C loop
+                return self._numpy(_as_arrays(boxes), n)
             run = self._native_kernel()
             if run is not None:
                 return run(boxes, n)
+        boxes = _as_arrays(boxes)
         if small:
             return self._run_scalar([b.tolist() for b in boxes], n, boxes)
         return self._numpy(boxes, n)
@@ -1492,6 +1498,15 @@ class _InclusionCache:
 
 
 _CACHE = _InclusionCache()
+
+
+def _as_arrays(boxes: Sequence[Any]) -> Sequence[np.ndarray]:
+    """Kernel inputs as ``(N_i, d_i, 2)`` arrays (rows of bound arrays gathered)."""
+    if any(not isinstance(b, np.ndarray) for b in boxes):
+        from ._native import as_arrays
+
+        return as_arrays(boxes)
+    return boxes
 
 
 def inclusion(fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
