@@ -13,7 +13,7 @@ from .._validate import as_boxes
 from ..exceptions import DimensionError, ModelError
 from ..interval import arith as _ar
 from ..interval._derivative import ParamFunction
-from ..interval._native import address, c_function
+from ..interval._native import Rows, address, c_function
 from ..interval.compiler import InclusionFunction, inclusion
 from ..model import Model
 from ..sets.base import SetBase
@@ -262,7 +262,7 @@ class _ComponentClassifier:
         run = F._native_kernel()
         if run is None:
             return None
-        return run([np.stack([fr.lo, fr.hi], axis=-1)], N)[0]
+        return run([Rows(fr.lo, fr.hi)], N)[0]  # read in place from the frontier's bounds
 
     def _decide_all(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_decide` for every element at once: ``(inside, outside)``, (N, k) booleans
