@@ -4,8 +4,10 @@ Prints one JSON line:
 
 * ``inclusion_1e5``: the CSTR natural inclusion at 1e5 boxes, boxes per second with the
   native backend (fused C loop) and with numpy, their ratio, and CasADi's own batched point
-  evaluation (``Function.map``, no intervals) as the hardware anchor; immrax (JAX, float64,
-  one core, rounding to nearest: not sound) where installed.
+  evaluation (``Function.map``, no intervals) as the hardware anchor; the native kernel's
+  C loop with the outward rounding taken out (``c_unrounded``: not sound, what a fused C
+  loop of this function does here); immrax (JAX, float64, one core, rounding to nearest:
+  not sound) where installed.
 * ``batch_300``: the CSTR natural and centered inclusions at 300 boxes (the mean batch of the
   set searches), µs per call, native against numpy.
 * ``call_n1``: one natural call at N = 1 on the 2-state cannon model (E8), µs, with the
@@ -71,10 +73,15 @@ def inclusion_1e5() -> dict:
     um = 0.5 * (args[1][..., 0] + args[1][..., 1])
     t_nat = median_time(lambda: nat(*args), 7)
     t_num = median_time(lambda: num(*args), 7)
+    t_c = _unsound_c_time(f, args)
     t_pt = median_time(lambda: pts(xm.T, um.T, np.zeros((0, 100_000))), 7)
     out = {"native_boxes_per_s": 1e5 / t_nat, "numpy_boxes_per_s": 1e5 / t_num,
            "casadi_points_per_s": 1e5 / t_pt, "native_over_numpy": t_num / t_nat,
            "native_cost_over_casadi_point": t_nat / t_pt}
+    if t_c is not None:  # the hardware's figure for this loop without outward rounding
+        out.update({"c_unrounded_boxes_per_s": 1e5 / t_c,
+                    "c_unrounded_over_numpy": t_num / t_c,
+                    "native_cost_over_c_unrounded": t_nat / t_c})
     try:
         t_imm = _immrax_time(f, *args[:2])
     except ImportError:
@@ -83,6 +90,43 @@ def inclusion_1e5() -> dict:
         out["immrax_boxes_per_s"] = 1e5 / t_imm
         out["native_over_immrax"] = t_imm / t_nat
     return out
+
+
+def _unsound_c_time(f, args: tuple) -> float | None:
+    """Median time of the native kernel's own C loop with the outward rounding taken out
+    (every bound moved by nothing, no NaN bookkeeping; the same exp polynomial): what a
+    fused C loop of this function does on this machine, the anchor of the issue's 8x. Not
+    sound: a benchmark figure only."""
+    import re
+
+    from casadi_cmpc.interval import _native
+
+    srcs: list[tuple] = []
+    orig = _native.load_kernel
+
+    def spy(src, size_in, size_out, wait=True):
+        srcs.append((src, size_in, size_out))
+        return orig(src, size_in, size_out, wait=wait)
+
+    _native.load_kernel = spy
+    try:
+        InclusionFunction(f, backend="native")(*[a[:2] for a in args])
+    finally:
+        _native.load_kernel = orig
+    if not srcs:
+        return None
+    src, size_in, size_out = srcs[-1]
+    for name in ("civ_dn", "civ_up", "civ_dns", "civ_ups", "civ_dnf", "civ_upf"):
+        src = re.sub(r"CIV_INLINE double %s\(double v\) \{.*?\n\}" % name,
+                     "CIV_INLINE double %s(double v) { return v; }" % name, src, flags=re.S)
+    src = re.sub(r"CIV_INLINE civ civ_make\(double lo, double hi\) \{.*?\n\}",
+                 "CIV_INLINE civ civ_make(double lo, double hi) { civ r; r.lo = lo; "
+                 "r.hi = hi; return r; }", src, flags=re.S)
+    run = _native.load_kernel(src, size_in, size_out)
+    if not run:
+        return None
+    boxes = list(args)
+    return median_time(lambda: run(boxes, boxes[0].shape[0]), 7)
 
 
 def _immrax_time(f, X: np.ndarray, U: np.ndarray) -> float:
