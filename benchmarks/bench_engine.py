@@ -117,8 +117,9 @@ def _unsound_c_time(f, args: tuple) -> float | None:
         return None
     src, size_in, size_out = srcs[-1]
     for name in ("civ_dn", "civ_up", "civ_dns", "civ_ups", "civ_dnf", "civ_upf"):
-        src = re.sub(r"CIV_INLINE double %s\(double v\) \{.*?\n\}" % name,
-                     "CIV_INLINE double %s(double v) { return v; }" % name, src, flags=re.S)
+        src = re.sub(r"CIV_INLINE double " + name + r"\(double v\) \{.*?\n\}",
+                     "CIV_INLINE double " + name + "(double v) { return v; }", src,
+                     flags=re.S)
     src = re.sub(r"CIV_INLINE civ civ_make\(double lo, double hi\) \{.*?\n\}",
                  "CIV_INLINE civ civ_make(double lo, double hi) { civ r; r.lo = lo; "
                  "r.hi = hi; return r; }", src, flags=re.S)
