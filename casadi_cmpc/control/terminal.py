@@ -309,19 +309,23 @@ def _scale_limit(Au: np.ndarray, limits: np.ndarray, rows: np.ndarray) -> float:
         return float(np.min(np.where(h > 0, limits / h, np.inf)))
 
 
-def _disturbance_floor(model: Model, Au: np.ndarray, gamma: float, Wb: Box | None,
+def _disturbance_floor(model: Model, Au: np.ndarray, Acl: np.ndarray, Wb: Box | None,
                        x_eq: np.ndarray, u_eq: np.ndarray, w_mid: np.ndarray) -> float:
-    """The smallest s at which the linearisation absorbs the disturbances of W:
-    ``gamma s + max_i max_w a_i E (w - w_mid) <= s`` (0 for a nominal search, inf when
-    the shape does not contract)."""
+    """The smallest s at which the linearisation absorbs the disturbances of W: every facet
+    ``a_i`` needs ``gamma_i s + push_i <= s``, with ``gamma_i = max_{Au x <= 1} a_i Acl x``
+    and ``push_i = max_w a_i E (w - w_mid)`` (both maxima are attained together: x and w
+    vary independently), so the floor is ``max_i push_i / (1 - gamma_i)`` (0 for a nominal
+    search; inf when a facet that W pushes out does not contract)."""
     if not model.l or Wb is None or np.array_equal(Wb.lo, Wb.hi):
         return 0.0
-    if gamma >= 1.0:
-        return np.inf
+    gamma = _lp_max(Au, Au @ Acl)
     E = np.asarray(model.jacobian_function("w")(x_eq, u_eq, w_mid), dtype=float)
     dw = np.asarray(Wb.vertices(), dtype=float) - w_mid
-    push = float((Au @ E @ dw.T).max())
-    return max(push, 0.0) / (1.0 - gamma)
+    push = np.maximum((Au @ E @ dw.T).max(axis=1), 0.0)
+    need = push > 0.0
+    if (gamma[need] >= 1.0).any():
+        return np.inf
+    return float(np.max(push[need] / (1.0 - gamma[need]), initial=0.0))
 
 
 # ------------------------------------------------------------------ the search
@@ -580,7 +584,7 @@ def terminal_set(model: Model, law: Any = None, *, W: Any = None, x_eq: Any = No
             limit = _scale_limit(Au, limits, rows) * (1.0 - 1e-9)
             if max_scale is not None:
                 limit = min(limit, float(max_scale))
-            floor = _disturbance_floor(model, Au, gamma, Wb, xe, ue, w_mid)
+            floor = _disturbance_floor(model, Au, Acl, Wb, xe, ue, w_mid)
             run = runs[k] = {"best": None, "stop": "", "eps": e_rel, "scale_limit": limit,
                              "min_scale": max(limit * float(min_scale), floor),
                              "disturbance_floor": floor, "unit_volume": _unit_volume(Au)}
