@@ -428,7 +428,8 @@ def _sequence_figure(ex: Any, seq: Any, trajs: list, out: Path) -> str:
         done = (f"recursion stopped: K_{seq.converged_at} no larger than "
                 f"K_{seq.converged_at - 1}")
     else:
-        done = f"K_{seq.converged_at} = K_{seq.converged_at - 1}: maximal set reached"
+        done = (f"recursion stopped: K_{seq.converged_at} = K_{seq.converged_at - 1} "
+                "(no new box at this eps)")
     ax.set_title(f"{ex.name} ({ex.info.get('example', '')}): controllable sets K_i and "
                  f"closed loops\neps = {seq.info.get('eps')}, "
                  f"{seq.info.get('semantics', '')}; {done}", fontsize="medium")

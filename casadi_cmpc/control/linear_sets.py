@@ -357,9 +357,12 @@ class SetSequence:
     sets : list
         ``sets[i]`` is K_i (``sets[0]`` is the target); also ``seq[i]``.
     converged_at : int or None
-        The first i with K_i = K_{i-1} (the maximal controllable set reached), else None;
-        for :func:`linear_controllable_sets`, equal up to the tolerance of LP inclusion
-        tests.
+        The first i with K_i = K_{i-1}, else None. For :func:`linear_controllable_sets`
+        (exact polytopes of a linear model) the maximal controllable set is reached, up to
+        the tolerance of the LP inclusion tests. For :func:`controllable_sets` (boxes at a
+        resolution eps) it is where the recursion stopped because no new box was proven:
+        the inner approximation stopped growing at this eps, which does not prove that the
+        maximal controllable set is reached (a finer eps may prove more).
     status : str
         ``"converged"``, ``"max_steps"`` (the recursion stopped at ``max_steps``),
         ``"until"`` (the given states were reached), ``"budget"`` (a step ran out of budget:

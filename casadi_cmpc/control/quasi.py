@@ -699,8 +699,9 @@ def quasi_controllable_sets(model: Model, target: Any, steps: int, eps: float, *
     ``P_0 = T``; ``K_m`` = :func:`quasi_controllable_set` towards ``P_{m-1}``; ``P_m`` = one
     polytope proven inside the inner boxes of ``K_m`` (:func:`casadi_cmpc.inner_polytope`,
     Alg 6.2 ``"separating"`` or Alg 6.5 ``"scaling"``). Stops when ``vol(P_m) <= (1 +
-    rtol) vol(P_{m-1})`` (converged: the maximal polytopic quasi set is reached, the
-    thesis' ``P_M = P_{M+1}``), when no box is proven, or after ``max_sets`` sets.
+    rtol) vol(P_{m-1})`` (converged: the thesis' stopping rule ``P_M = P_{M+1}``; at a
+    resolution eps this is where the polytopes stopped growing, not a proof that the
+    maximal quasi set is reached), when no box is proven, or after ``max_sets`` sets.
 
     Parameters
     ----------
