@@ -30,6 +30,7 @@ import json
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -534,6 +535,7 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
          checkpoint: str | None = None, workers: int | None = None,
          scheduler: str | None = None, eps: float | None = None) -> int:
     from . import models
+    from .exceptions import CmpcWarning
     from .mpc.simulate import _summary_lines, simulate
 
     try:
@@ -581,11 +583,17 @@ def _run(name: str, out: str | None, steps: int | None, seed: int,
         ctrl.reset()
         print(f"\nrun {i}: x0 = {x0.tolist()}, {n_steps} steps"
               + (f", disturbance {disturbance}" if disturbance else ""))
-        traj = simulate(model, ctrl, x0, n_steps, disturbance=disturbance, seed=seed + i - 1,
-                        progress=progress, plant=run.get("plant"))
+        with warnings.catch_warnings():  # said below, in the run's own words
+            warnings.filterwarnings("ignore", "the state lies in no set", CmpcWarning)
+            traj = simulate(model, ctrl, x0, n_steps, disturbance=disturbance,
+                            seed=seed + i - 1, progress=progress, plant=run.get("plant"))
         if traj.interrupted:  # Ctrl-C: the run ends (exit code 130), nothing is written
             raise KeyboardInterrupt
         trajs.append(traj)
+        if traj.stop_reason == "not_controllable":
+            print(f"  stopped at step {traj.steps}: x = {traj.x[-1].tolist()} lies in no set "
+                  "of the sequence (not controllable as far as the sets at this eps prove; "
+                  "a finer --eps proves more)")
         s = traj.summary()
         dist = float(np.abs(ctrl.contract @ (traj.x[-1] - x_ref)).max())
         certs = s.get("certificates", {})

@@ -16,6 +16,7 @@ __all__ = [
     "ModelError",
     "UnsupportedOperationError",
     "SolverError",
+    "NotControllableError",
     "CmpcWarning",
 ]
 
@@ -54,6 +55,12 @@ class UnsupportedOperationError(CmpcError, NotImplementedError):
 
 class SolverError(CmpcError, RuntimeError):
     """A numerical solver failed."""
+
+
+class NotControllableError(CmpcError, ValueError):
+    """A set-sequence controller was asked for a control at a state that lies in no set of
+    its sequence: not controllable as far as the sequence proves. :func:`~casadi_cmpc
+    .simulate` ends the run there (``stop_reason == "not_controllable"``)."""
 
 
 class CmpcWarning(UserWarning):

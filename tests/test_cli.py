@@ -339,3 +339,17 @@ def test_the_cache_files_are_small(cache):
         assert path.stat().st_size <= 48 * n_boxes + 64_000, (name, path.stat().st_size)
         checked += 1
     assert checked >= 1
+
+
+def test_a_start_in_no_set_ends_the_run_with_a_report(tmp_path, capsys):
+    """At a coarse eps the sets may not reach x0: the run stops there (not controllable as
+    far as the sets prove), says so, and the summary and figures are still written."""
+    out = tmp_path / "out"
+    assert main(["run", "khalil_affine_state", "--eps", "0.1", "--out", str(out),
+                 "--no-progress", "--cache", str(tmp_path / "c")]) == 0
+    text = capsys.readouterr().out
+    assert "lies in no set of the sequence" in text and "Traceback" not in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["runs"][0]["stop_reason"] == "not_controllable"
+    assert summary["runs"][0]["steps"] == 0
+    assert (out / "sets.png").is_file()

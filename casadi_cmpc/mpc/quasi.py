@@ -35,7 +35,7 @@ from ..control.quasi import (
     lp_controls,
 )
 from ..control.quasi import _step as _zstep
-from ..exceptions import DimensionError, ModelError
+from ..exceptions import DimensionError, ModelError, NotControllableError
 from ..model import Model
 from ..sets._reach import box_of
 from ..solvers.engine import Status
@@ -244,9 +244,12 @@ class QuasiMultiStepMPC:
         self.last_info = {}
 
     def __call__(self, x: Any) -> np.ndarray:
-        """The control to apply at x (m,); raises ValueError where x lies in no set."""
+        """The control to apply at x (m,); raises NotControllableError (a ValueError) where x
+        lies in no set."""
         res = self.solve(x)
         if res.u is None or not np.isfinite(res.u).all():
+            if res.certificate.label == "not_controllable":
+                raise NotControllableError(res.certificate.reason)
             raise ValueError(res.certificate.reason)
         return res.u
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from .._interrupt import solver_call
 from .._validate import float_vector, weight_matrix
-from ..exceptions import CmpcWarning, DimensionError, ModelError
+from ..exceptions import CmpcWarning, DimensionError, ModelError, NotControllableError
 from ..interval.compiler import InclusionFunction
 from ..interval.modal import SemanticExtension
 from ..model import Model
@@ -780,6 +780,8 @@ class SetSequenceMPC:
         as far as the sequence proves."""
         res = self.solve(x)
         if res.u is None or not np.isfinite(res.u).all():
+            if res.certificate.label == "not_controllable":
+                raise NotControllableError(res.certificate.reason)
             raise ValueError(res.certificate.reason)
         return res.u
 

@@ -21,14 +21,20 @@ import numpy as np
 
 from .._interrupt import InterruptScope
 from .._validate import as_float_array
-from ..exceptions import DimensionError, InvalidBoundsError, ModelError
+from ..exceptions import (
+    CmpcWarning,
+    DimensionError,
+    InvalidBoundsError,
+    ModelError,
+    NotControllableError,
+)
 from ..model import Model
 
 __all__ = ["simulate", "Trajectory"]
 
 _FORMAT = "casadi_cmpc.Trajectory"
 _FORMAT_VERSION = 2  # 2: per-step levels of set-sequence controllers
-_STOP_REASONS = ("steps", "stop_when", "interrupted", "diverged")
+_STOP_REASONS = ("steps", "stop_when", "interrupted", "diverged", "not_controllable")
 _LIST_FIELDS = ("status", "certificate", "horizon", "mode", "level")
 # the kind of a step, from the mode the controller reported
 _SOLVER_MODES = frozenset({"mpc"})
@@ -85,7 +91,9 @@ class Trajectory:
     stop_reason : str
         Why the run ended: ``"steps"`` (all steps run), ``"stop_when"`` (the ``stop_when``
         test held), ``"interrupted"`` (KeyboardInterrupt), ``"diverged"`` (a non-finite
-        successor state; it is the last row of ``x``).
+        successor state; it is the last row of ``x``), ``"not_controllable"`` (a set-sequence
+        controller found the state in no set of its sequence: it raised
+        :class:`~casadi_cmpc.NotControllableError`; the state is the last row of ``x``).
     disturbance : str
         How w was chosen: ``"none"``, ``"centre"``, ``"uniform"``, ``"vertices"``,
         ``"array"`` or ``"callable"``.
@@ -750,6 +758,13 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
             t0 = time.perf_counter()
             try:
                 u_raw = controller.fun(x.copy())
+            except NotControllableError as exc:
+                reason = "not_controllable"
+                warnings.warn(f"the state lies in no set of the controller's sequence at step "
+                              f"{k} ({x.tolist()}): not controllable as far as the sequence "
+                              f"proves; the simulation stops there ({exc})", CmpcWarning,
+                              stacklevel=2)
+                break
             except Exception as exc:
                 if hasattr(exc, "add_note"):  # Python >= 3.11
                     exc.add_note(f"raised by the controller at step {k}, x = {x.tolist()}")

@@ -69,11 +69,14 @@ def test_solve_reports_plan_and_claim(e12, e12_ctrl):
 def test_not_controllable_state_raises(e12, e12_ctrl):
     e12_ctrl.reset()
     x = np.array([0.999, 0.999])
-    if e12_ctrl.level(x) is None:
-        res = e12_ctrl.solve(x)
-        assert res.certificate.label == "not_controllable" and not res.success
-        with pytest.raises(ValueError):
-            e12_ctrl(x)
+    assert e12_ctrl.level(x) is None
+    res = e12_ctrl.solve(x)
+    assert res.certificate.label == "not_controllable" and not res.success
+    with pytest.raises(cm.NotControllableError):  # a ValueError
+        e12_ctrl(x)
+    with pytest.warns(cm.CmpcWarning, match="lies in no set"):
+        traj = cm.simulate(e12.model, e12_ctrl, x, steps=3, progress=False)
+    assert traj.stop_reason == "not_controllable" and traj.steps == 0
 
 
 def _three_state():

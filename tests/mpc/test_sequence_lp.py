@@ -219,3 +219,23 @@ def test_verified_steps_are_exactly_true_and_inner_states_are_verified(problem, 
             assert exactly_mapped_into(model, T, x, r.u), (x, r.u)
         if lam > 0:  # room of about lam times the centre's: the step must be proven
             assert r.certificate.label == "verified", (x, lam, r.certificate, r.stats)
+
+
+@pytest.mark.parametrize("solver", ["lp", "ipopt"])
+def test_a_state_in_no_set_is_not_controllable_and_ends_a_simulation(e1, solver):
+    """Outside every set of the sequence the controller raises NotControllableError (a
+    ValueError); simulate ends the run there with stop_reason "not_controllable", a
+    warning, and the steps made so far (none from such an x0)."""
+    ex, seq = e1
+    ctrl = cm.SetSequenceMPC(ex.model, seq, np.eye(2), 1.0, local_law=ex.local_law,
+                             solver=solver)
+    x0 = ex.model.X.hi * 0.999  # a corner of X, beyond the last set
+    assert seq.level(x0) is None
+    assert ctrl.solve(x0).certificate.label == "not_controllable"
+    with pytest.raises(cm.NotControllableError, match="lies in no set"):
+        ctrl(x0)
+    with pytest.warns(cm.CmpcWarning, match="lies in no set"):
+        traj = cm.simulate(ex.model, ctrl, x0, steps=5, progress=False)
+    assert traj.stop_reason == "not_controllable" and traj.steps == 0
+    assert np.array_equal(traj.x[-1], x0)
+    assert issubclass(cm.NotControllableError, ValueError)
