@@ -366,6 +366,15 @@ class SetSequenceMPC:
         self.robust = bool(robust) and model.l > 0
         self._Wbox, _, _ = _w_setup(model, self.robust, None)
         self._law, self._law_proved = self._local_law(local_law)
+        # a sequence computed for another map f: its sets are not proven controllable for
+        # this model (each step is still certified on this model, one by one)
+        self._other_model = seq.info.get("model_key") not in (None, _model_key(model))
+        if self._other_model:
+            warnings.warn(f"the sequence was computed for model '{seq.info.get('model')}' "
+                          f"(another map f than '{model.name}'): its sets are not proven "
+                          "controllable for this model, so no bound on the steps to T is "
+                          "claimed; each applied control is still certified on this model",
+                          CmpcWarning, stacklevel=2)
         self._w_vertices = (np.asarray(model.W.vertices()) if self.robust else
                             self._Wbox[:, 0][None]) if model.l else np.zeros((1, 0))
         self._targets: dict[int, Any] = {}
@@ -754,6 +763,12 @@ class SetSequenceMPC:
                if self._law_proved else
                "inside T the local law is applied, but T's invariance under it is NOT "
                "proven, so staying in T is not guaranteed")
+        if self._other_model:
+            return (f"the sets K_i were computed for another model "
+                    f"('{self.seq.info.get('model')}'): a control certified on this model to "
+                    f"bring the state into K_(i-1){w} is applied where one is found (the step "
+                    "says so in its label), but that one exists at every step is not proven "
+                    f"for this model, so reaching T is not guaranteed; {law}")
         return (f"from x in K_i every applied control is certified to bring the state into "
                 f"K_(i-1), so T = K_0 is reached in at most i steps{w}; {law}. A step that "
                 "is not certified (e.g. x outside every K_i) says so in its label")

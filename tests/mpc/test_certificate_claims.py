@@ -214,3 +214,22 @@ def test_contractive_claims_name_the_nominal_w_and_hold_exactly() -> None:
         assert sq[-1] <= F(0.9) ** 2 * sq[0]
         n_ver += 1
     assert n_ver > 5
+
+
+def test_a_sequence_of_another_model_claims_no_step_bound() -> None:
+    """A sequence computed for one map f, used by a controller of another: a warning, a
+    guarantee without the bound on the steps to T, local-law steps "not proven"; the
+    steps this controller certifies hold for its own model."""
+    m = _model()
+    seq = cm.controllable_sets(m, T, 0.25, robust=True, law=np.zeros((1, 2)), max_steps=2,
+                               progress=False)
+    same = cm.SetSequenceMPC(m, seq, solver="sqp")
+    assert "reached in at most i steps" in same.guarantee
+    other = cm.Model(x=m.x, u=m.u, w=m.w, f=m.f + ca.vertcat(0.08, 0.0), X=m.X, U=m.U,
+                     W=m.W, name="shifted")
+    with pytest.warns(cm.CmpcWarning, match="another map f"):
+        ctrl = cm.SetSequenceMPC(other, seq, solver="sqp")
+    assert "at most i steps" not in ctrl.guarantee and "not guaranteed" in ctrl.guarantee
+    r = ctrl.solve(np.zeros(2))
+    assert r.certificate.label == "local_law" and r.certificate.proved is None
+    assert "another map f" in r.certificate.reason
