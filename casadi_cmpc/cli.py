@@ -1040,7 +1040,7 @@ def _command(parser: Any, args: Any) -> int:
     if args.command == "list":
         from . import models
 
-        for n in models.names():
+        for n in models.names(validated=True):  # the validated variants last
             print(_example_line(n))
         return 0
     if args.steps is not None and args.steps < 1:

@@ -48,6 +48,7 @@ _PARTS = {
     "version": "the casadi_cmpc version",
     "format": "the checkpoint format",
 }
+_PLURAL = ("obstacles", "w_points")  # "the obstacles differ"
 # parts shown with both values in the message (short, readable texts)
 _SHOWN = ("eps", "robust", "polytopic", "u_eps", "max_cells", "terminal", "version", "format",
           "X", "U", "W")
@@ -258,7 +259,7 @@ class Checkpoint:
                 diffs.append(f"{what}: {stored.get(name, 'missing')} in the checkpoint, "
                              f"{text} here")
             else:
-                diffs.append(f"{what} differs")
+                diffs.append(f"{what} {'differ' if name in _PLURAL else 'differs'}")
         if diffs:
             raise CheckpointError(
                 f"checkpoint '{self.path}' was computed for another problem (" +
