@@ -641,9 +641,11 @@ class Rows:
     take :meth:`boxes`."""
 
     __slots__ = ("lo", "hi", "start", "stop", "idx")
+    in_use = False  # set by the first instance: until then no caller has to look for them
 
     def __init__(self, lo: np.ndarray, hi: np.ndarray, start: int = 0,
                  stop: int | None = None, idx: np.ndarray | None = None) -> None:
+        Rows.in_use = True
         self.lo = np.ascontiguousarray(lo, dtype=np.float64)
         self.hi = self.lo if hi is lo else np.ascontiguousarray(hi, dtype=np.float64)
         if self.lo.ndim != 2 or self.lo.shape != self.hi.shape:

@@ -39,6 +39,8 @@ from ..exceptions import (
 from . import _derivative as _dv
 from . import _scalar as _S
 from . import arith
+from ._native import Rows as _Rows
+from ._native import as_arrays as _native_as_arrays
 
 __all__ = ["inclusion", "InclusionFunction", "inclusion_cache_clear"]
 
@@ -1501,11 +1503,10 @@ _CACHE = _InclusionCache()
 
 
 def _as_arrays(boxes: Sequence[Any]) -> Sequence[np.ndarray]:
-    """Kernel inputs as ``(N_i, d_i, 2)`` arrays (rows of bound arrays gathered)."""
-    if any(not isinstance(b, np.ndarray) for b in boxes):
-        from ._native import as_arrays
-
-        return as_arrays(boxes)
+    """Kernel inputs as ``(N_i, d_i, 2)`` arrays (rows of bound arrays gathered; nothing
+    to look for before the first :class:`~._native.Rows` of the process)."""
+    if _Rows.in_use and any(type(b) is _Rows for b in boxes):
+        return _native_as_arrays(boxes)
     return boxes
 
 
