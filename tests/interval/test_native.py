@@ -456,3 +456,54 @@ def test_weights_0_and_1_are_exact_and_keep_undefined_parts(seed, kind):
             for j in range(3):
                 if isinstance(ref[j], mpmath.mpf):  # (else undefined at p)
                     assert inside(a[k, j, 0], a[k, j, 1], ref[j]), (kind, k, j)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["natural", "centered"]),
+       gather=st.booleans(), one_u=st.booleans())
+def test_kernels_read_rows_and_strided_views_in_place(seed, kind, gather, one_u):
+    """The native kernels read boxes given as rows of bound arrays (a column range, optional
+    row indices, a broadcast row) and as non-contiguous (N, d, 2) views: the enclosures are
+    those of the same boxes as contiguous arrays, bit for bit; the numpy evaluator gets
+    them gathered (the same enclosures as its own arrays)."""
+    from casadi_cmpc.interval._native import Rows
+
+    x = ca.SX.sym("x", 3)
+    u = ca.SX.sym("u", 2)
+    f = ca.Function("f", [x, u], [ca.vertcat(x[0] * u[1] + ca.sin(x[2]), x[1] ** 2 - u[0],
+                                             x[0] / (2.0 + x[1] ** 2) + u[0] * u[1])])
+    rng = np.random.default_rng(seed)
+    R = 300
+    lo = rng.uniform(-2, 2, (R, 6))  # columns: x (3), u (2), one more
+    hi = lo + rng.uniform(0, 0.3, (R, 6)) * (rng.random((R, 6)) < 0.8)
+    idx = rng.integers(0, R, 257) if gather else None
+    rows_x = Rows(lo, hi, 0, 3, idx)
+    rows_u = Rows(lo[:1], hi[:1], 3, 5) if one_u else Rows(lo, hi, 3, 5, idx)
+    X, Uu = rows_x.boxes(), rows_u.boxes()
+    n = X.shape[0]
+    F = InclusionFunction(f, kind, backend="native")
+    ref = F.evaluate_unchecked([np.ascontiguousarray(X), np.ascontiguousarray(Uu)], n)[0]
+    got = F.evaluate_unchecked([rows_x, rows_u], n)[0]
+    assert np.array_equal(got, ref, equal_nan=True)
+    # a non-contiguous view: every other box of a larger array
+    big = np.zeros((2 * n, 3, 2))
+    big[::2] = X
+    view = big[::2]
+    assert not view.flags.c_contiguous
+    assert np.array_equal(F.evaluate_unchecked([view, Uu], n)[0], ref, equal_nan=True)
+    # numpy gathers them
+    Fn = InclusionFunction(f, kind, backend="numpy")
+    assert np.array_equal(Fn.evaluate_unchecked([rows_x, rows_u], n)[0],
+                          Fn.evaluate_unchecked([X, Uu], n)[0], equal_nan=True)
+
+
+def test_rows_are_checked():
+    from casadi_cmpc.interval._native import Rows
+
+    a = np.zeros((4, 3))
+    with pytest.raises(ValueError, match="2-D"):
+        Rows(a, np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="column range"):
+        Rows(a, a, 2, 5)
+    r = Rows(a, a, 1, 3, np.array([3, 0]))
+    assert r.shape == (2, 2, 2) and r.boxes().shape == (2, 2, 2)
