@@ -329,3 +329,21 @@ def test_controllable_sets_bar_counts_the_steps_done(bars):
     assert len(rec) == 1
     total, n, _ = rec[0]
     assert n == len(seq) - 1 and total in (None, n)  # never 3/100
+
+
+def test_summary_says_which_steps_were_proven():
+    """Steps whose status is not PROVED are counted apart, by certificate label (a
+    local-law step in a set whose invariance is not proven keeps the label local_law)."""
+    K = 5
+    traj = cm.Trajectory(x=np.zeros((K + 1, 1)), u=np.zeros((K, 1)), w=np.zeros((K, 0)),
+                         status=("PROVED", "PROVED", "UNDECIDED", "PROVED", "ok"),
+                         certificate=("verified", "local_law", "local_law", "local_law", None),
+                         horizon=(None,) * K, solve_time=np.full(K, 1e-3),
+                         call_time=np.full(K, 1e-3), mode=("mpc",) + ("local_law",) * 3
+                         + ("feedback",), level=())
+    s = traj.summary()
+    assert s["certificates"] == {"local_law": 3, "none": 1, "verified": 1}
+    assert s["proven_steps"] == 3
+    assert s["not_proven"] == {"local_law": 1, "none": 1}
+    assert _summary_lines(s)[-1] == ("proven steps (status PROVED): 3 of 5; not proven: "
+                                     "local_law: 1, no certificate: 1")

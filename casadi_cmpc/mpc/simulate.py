@@ -230,7 +230,11 @@ class Trajectory:
         Keys: ``model``, ``n``, ``m``, ``l``, ``steps``, ``stop_reason``, ``interrupted``,
         ``disturbance``, ``seed``, ``x0``, ``final_state``, ``final_norm_inf`` (max-norm of
         ``x(K)``), ``violations`` (counts and step indices), ``certificates``, ``statuses``,
-        ``modes`` (counts per value, ``"none"`` for None), ``step_kinds`` (steps per
+        ``modes`` (counts per value, ``"none"`` for None), ``proven_steps`` (steps whose
+        status is PROVED: their certificate's claim holds), ``not_proven`` (the other
+        steps, counted by certificate label: e.g. a local-law step in a set whose
+        invariance is not proven keeps the label ``"local_law"`` and counts here),
+        ``step_kinds`` (steps per
         :attr:`step_kind`: ``"solver"``, ``"local_law"``, ``"other"``; they add up to
         ``steps``), ``horizons`` (histogram of the prediction horizons, keys as strings,
         over the steps that report no level), ``levels`` (histogram of the set-sequence
@@ -272,6 +276,9 @@ class Trajectory:
                            "input_steps": list(self.violations["input_steps"])},
             "certificates": counts(self.certificate),
             "statuses": counts(self.status),
+            "proven_steps": sum(st == "PROVED" for st in self.status),
+            "not_proven": counts(tuple(c for c, st in zip(self.certificate, self.status,
+                                                          strict=True) if st != "PROVED")),
             "modes": counts(self.mode),
             "step_kinds": {k: kinds.count(k) for k in _STEP_KINDS},
             "horizons": histogram([h for h, lv in zip(self.horizon, self.level, strict=True)
@@ -428,6 +435,11 @@ def _summary_lines(s: Mapping[str, Any]) -> list[str]:
     if horizons:
         lines.append("prediction horizons used: " + ", ".join(
             f"N = {k}: {plural(c, 'step')}" for k, c in horizons.items()))
+    if "proven_steps" in s and total:  # what the certificates of the steps proved
+        unproven = s.get("not_proven") or {}
+        lines.append(f"proven steps (status PROVED): {int(s['proven_steps'])} of {total}" + (
+            "; not proven: " + ", ".join(f"{'no certificate' if k == 'none' else k}: {c}"
+                                         for k, c in unproven.items()) if unproven else ""))
     return lines
 
 
