@@ -345,5 +345,19 @@ def test_summary_says_which_steps_were_proven():
     assert s["certificates"] == {"local_law": 3, "none": 1, "verified": 1}
     assert s["proven_steps"] == 3
     assert s["not_proven"] == {"local_law": 1, "none": 1}
-    assert _summary_lines(s)[-1] == ("proven steps (status PROVED): 3 of 5; not proven: "
-                                     "local_law: 1, no certificate: 1")
+    assert _summary_lines(s)[-1] == ("proven steps: 3 of 5; not proven: local_law: 1, "
+                                     "no certificate: 1")
+
+
+def test_proven_steps_of_a_set_sequence_controller(scalar_seq):
+    """The set-sequence controllers report a proven step with status "ok" and a
+    certificate: every step of this run is proven (verified steps, then the local law in a
+    T proven invariant); a plain gain reports no certificate: nothing is proven."""
+    model, seq = scalar_seq
+    ctrl = cm.SetSequenceMPC(model, seq, solver="sqp")
+    traj = cm.simulate(model, ctrl, [0.9], 6, progress=False)
+    s = traj.summary()
+    assert set(traj.certificate) <= {"verified", "local_law"} and "verified" in traj.certificate
+    assert s["proven_steps"] == 6 and s["not_proven"] == {}
+    g = cm.simulate(model, np.array([[-1.0]]), [0.9], 3, progress=False).summary()
+    assert g["proven_steps"] == 0 and g["not_proven"] == {"none": 3}

@@ -655,6 +655,9 @@ class Rows:
         if not 0 <= self.start <= self.stop <= self.lo.shape[1]:
             raise ValueError("Rows: the column range lies outside the arrays")
         self.idx = None if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
+        if self.idx is not None and self.idx.size and (
+                self.idx.min() < 0 or self.idx.max() >= self.lo.shape[0]):
+            raise IndexError(f"Rows: row indices must lie in [0, {self.lo.shape[0]})")
 
     @property
     def shape(self) -> tuple[int, int, int]:

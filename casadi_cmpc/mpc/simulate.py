@@ -231,9 +231,10 @@ class Trajectory:
         ``disturbance``, ``seed``, ``x0``, ``final_state``, ``final_norm_inf`` (max-norm of
         ``x(K)``), ``violations`` (counts and step indices), ``certificates``, ``statuses``,
         ``modes`` (counts per value, ``"none"`` for None), ``proven_steps`` (steps whose
-        status is PROVED: their certificate's claim holds), ``not_proven`` (the other
-        steps, counted by certificate label: e.g. a local-law step in a set whose
-        invariance is not proven keeps the label ``"local_law"`` and counts here),
+        certificate's claim holds: status PROVED, or ``"ok"`` with a certificate, as the
+        set-sequence controllers report it), ``not_proven`` (the other steps, counted by
+        certificate label, ``"none"`` for a step without one: e.g. a local-law step in a
+        set whose invariance is not proven keeps the label ``"local_law"`` and counts here),
         ``step_kinds`` (steps per
         :attr:`step_kind`: ``"solver"``, ``"local_law"``, ``"other"``; they add up to
         ``steps``), ``horizons`` (histogram of the prediction horizons, keys as strings,
@@ -255,6 +256,11 @@ class Trajectory:
                     sorted(hist.items(), key=lambda kv: (kv[0] is None, kv[0] or 0))}
 
         kinds = self.step_kind
+        # a proven step: status PROVED (contractive MPC), or "ok" with a certificate (the
+        # set-sequence controllers report a proven step as "ok", the others by the name of
+        # their status); "ok" without a certificate is a controller that reports none
+        proven = [st == "PROVED" or (st == "ok" and c is not None)
+                  for st, c in zip(self.status, self.certificate, strict=True)]
         solver = np.array([k == "solver" for k in kinds], dtype=bool)
         solve_time = _time_stats(self.solve_time[solver])
         solve_time["steps"] = int(solver.sum())
@@ -276,9 +282,9 @@ class Trajectory:
                            "input_steps": list(self.violations["input_steps"])},
             "certificates": counts(self.certificate),
             "statuses": counts(self.status),
-            "proven_steps": sum(st == "PROVED" for st in self.status),
-            "not_proven": counts(tuple(c for c, st in zip(self.certificate, self.status,
-                                                          strict=True) if st != "PROVED")),
+            "proven_steps": sum(proven),
+            "not_proven": counts(tuple(c for c, ok in zip(self.certificate, proven,
+                                                          strict=True) if not ok)),
             "modes": counts(self.mode),
             "step_kinds": {k: kinds.count(k) for k in _STEP_KINDS},
             "horizons": histogram([h for h, lv in zip(self.horizon, self.level, strict=True)
@@ -437,7 +443,7 @@ def _summary_lines(s: Mapping[str, Any]) -> list[str]:
             f"N = {k}: {plural(c, 'step')}" for k, c in horizons.items()))
     if "proven_steps" in s and total:  # what the certificates of the steps proved
         unproven = s.get("not_proven") or {}
-        lines.append(f"proven steps (status PROVED): {int(s['proven_steps'])} of {total}" + (
+        lines.append(f"proven steps: {int(s['proven_steps'])} of {total}" + (
             "; not proven: " + ", ".join(f"{'no certificate' if k == 'none' else k}: {c}"
                                          for k, c in unproven.items()) if unproven else ""))
     return lines

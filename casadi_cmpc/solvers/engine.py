@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._bisect import bisect_widest, widest_of
+from .._bisect import _COLUMN_MAX, bisect_widest, widest_of
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ..interval._native import address, c_function
@@ -755,8 +755,11 @@ def _group_first(group: np.ndarray, mask: np.ndarray, G: int) -> np.ndarray:
     first = np.full(G, N, dtype=np.intp)
     fn = _group_kernel("cmpc_group_first") if N >= _GROUP_MIN else None
     if fn is not None:
-        fn(N, address(np.ascontiguousarray(group, dtype=np.int64)),
-           address(np.ascontiguousarray(mask, dtype=bool)), address(first))
+        # converted arrays held by names until the call returns (an address alone does not
+        # keep a temporary copy alive)
+        g64 = np.ascontiguousarray(group, dtype=np.int64)
+        m8 = np.ascontiguousarray(mask, dtype=bool)
+        fn(N, address(g64), address(m8), address(first))
         return first
     idx = np.flatnonzero(mask)
     np.minimum.at(first, group[idx], idx)
@@ -771,9 +774,11 @@ def _group_hull(inv: np.ndarray, G: int, lo: np.ndarray, hi: np.ndarray
     ghi = np.full((G, d), -np.inf)
     fn = _group_kernel("cmpc_group_hull") if lo.shape[0] >= _GROUP_MIN else None
     if fn is not None:
-        fn(lo.shape[0], d, address(np.ascontiguousarray(inv, dtype=np.int64)),
-           address(np.ascontiguousarray(lo, dtype=float)),
-           address(np.ascontiguousarray(hi, dtype=float)), address(glo), address(ghi))
+        inv64 = np.ascontiguousarray(inv, dtype=np.int64)
+        lo = np.ascontiguousarray(lo, dtype=float)
+        hi = np.ascontiguousarray(hi, dtype=float)
+        fn(lo.shape[0], d, address(inv64), address(lo), address(hi), address(glo),
+           address(ghi))
         return glo, ghi
     np.minimum.at(glo, inv, lo)
     np.maximum.at(ghi, inv, hi)
@@ -951,7 +956,7 @@ class PairFrontier:
             return out, small
         g = self.group
         G = int(g.max()) + 1
-        if self.shared is None and N >= _GROUP_MIN:
+        if self.shared is None and N >= _GROUP_MIN and max(self.n, self.m) <= _COLUMN_MAX:
             got = self._reduce_native(labels, eps, G)
             if got is not None:
                 return got
@@ -1011,8 +1016,9 @@ class PairFrontier:
         hi = np.ascontiguousarray(self.hi, dtype=np.float64)
         xs = np.ascontiguousarray(np.broadcast_to(self.x_scale, (n,)), dtype=np.float64)
         us = np.ascontiguousarray(self.u_scale, dtype=np.float64) if d > n else xs
-        fn(N, G, a(np.ascontiguousarray(self.group, dtype=np.int64)),
-           a(np.ascontiguousarray(labels, dtype=np.int8)), d, n, a(lo), a(hi), a(xs), a(us),
+        g64 = np.ascontiguousarray(self.group, dtype=np.int64)  # held until the call returns
+        lab = np.ascontiguousarray(labels, dtype=np.int8)
+        fn(N, G, a(g64), a(lab), d, n, a(lo), a(hi), a(xs), a(us),
            float(eps), float(self.u_eps), a(u_can), self.max_cells, c0, c0 + 8 * G,
            c0 + 16 * G, c0 + 24 * G, c0 + 32 * G, f0, f0 + 8 * G, f0 + 16 * G, a(gflag),
            a(out), a(small), a(mode))
@@ -1087,10 +1093,16 @@ class PairFrontier:
         """``self.take(idx).split()`` for increasing indices ``idx`` (the pairs that grow):
         the same children and stuck boxes, in the same order, by one C pass over the
         selected pairs where it is available (numpy otherwise)."""
-        idx = np.asarray(idx, dtype=np.intp)
+        idx = np.asarray(idx)
+        if idx.dtype == bool:  # a mask, as take() reads it
+            idx = np.flatnonzero(idx)
+        idx = np.ascontiguousarray(idx, dtype=np.int64)  # held until the call returns
         fn = _group_kernel("cmpc_pair_split") if idx.size >= _GROUP_MIN else None
-        if fn is None or (self.restart is not None and (
-                self.data is None or not set(self.restart) <= set(self.data))):
+        # (more than _COLUMN_MAX coordinates: widest_of's numpy rule picks a NaN width, the
+        # C loop's does not; the numpy split keeps that rule there)
+        if fn is None or self.n > _COLUMN_MAX or self.m > _COLUMN_MAX or (
+                self.restart is not None and (
+                    self.data is None or not set(self.restart) <= set(self.data))):
             return self.take(idx).split()
         n, d = self.n, self.lo.shape[1]
         mode, can = self._u_mode, self._u_can
@@ -1128,8 +1140,9 @@ class PairFrontier:
         a = address
         lo = np.ascontiguousarray(self.lo, dtype=np.float64)
         hi = np.ascontiguousarray(self.hi, dtype=np.float64)
-        fn(M, a(np.ascontiguousarray(idx, dtype=np.int64)), d, n, a(lo), a(hi), a(g),
-           a(np.ascontiguousarray(mode, dtype=bool)), a(np.ascontiguousarray(can, dtype=bool)),
+        mode8 = np.ascontiguousarray(mode, dtype=bool)
+        can8 = np.ascontiguousarray(can, dtype=bool)
+        fn(M, a(idx), d, n, a(lo), a(hi), a(g), a(mode8), a(can8),
            a(us), a(xs), float(self.split_ratio), G, a(first), a(glo), a(ghi), a(gk), a(gc),
            a(gok), a(rank), a(pk), a(pc), a(pok), a(clo), a(chi), a(csrc), a(cgrp), a(slo),
            a(shi), a(ssrc), a(sgrp), a(counts))

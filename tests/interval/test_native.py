@@ -507,3 +507,6 @@ def test_rows_are_checked():
         Rows(a, a, 2, 5)
     r = Rows(a, a, 1, 3, np.array([3, 0]))
     assert r.shape == (2, 2, 2) and r.boxes().shape == (2, 2, 2)
+    for bad in ([-1], [4], [0, 10**6]):  # rows the kernels would read out of bounds
+        with pytest.raises(IndexError, match="row indices"):
+            Rows(a, a, 0, 3, np.array(bad))

@@ -241,7 +241,9 @@ def test_reduce_in_c_equals_numpy(seed, N, G, n, m, max_cells, eps, sorted_group
                             max_cells=max_cells)
 
     a, b = frontier(), frontier()
-    got = a._reduce_native(labels, eps, int(g.max()) + 1)
+    # group ids and labels of other integer types (converted copies must outlive the call)
+    a.group = a.group.astype(np.int32)
+    got = a._reduce_native(labels.astype(np.int64), eps, int(g.max()) + 1)
     saved = E._GROUP_MIN
     E._GROUP_MIN = 10 ** 9  # the numpy reduction
     try:
@@ -308,7 +310,46 @@ def test_split_of_selected_pairs_in_c_equals_take_then_split(seed, N, G, n, m, m
         labels = rng.choice(np.array([INNER, OUTER, UNDECIDED], dtype=np.int8), N)
         A.reduce(labels, 0.05)
         B._u_mode, B._u_can = A._u_mode.copy(), A._u_can.copy()
-    sel = np.flatnonzero(rng.random(N) < rng.uniform(0.3, 1.0))
+    mask = rng.random(N) < rng.uniform(0.3, 1.0)
+    sel = np.flatnonzero(mask)
     c1, s1 = A.split_selected(sel)
     c2, s2 = B.take(sel).split()
+    assert _same_frontier(c1, c2) and _same_frontier(s1, s2)
+    # a boolean mask, and indices as a strided int32 view (converted copies)
+    c3, s3 = A.split_selected(mask)
+    assert _same_frontier(c3, c2) and _same_frontier(s3, s2)
+    wide = np.zeros(2 * sel.size, dtype=np.int32)
+    wide[::2] = sel
+    c4, s4 = A.split_selected(wide[::2])
+    assert _same_frontier(c4, c2) and _same_frontier(s4, s2)
+
+
+def test_split_and_reduce_of_many_coordinates_keep_the_numpy_rule():
+    """Beyond the C loops' 8 coordinates (where numpy's widest picks a NaN width first) the
+    pair frontier splits and reduces as numpy does: same children and labels."""
+    from casadi_cmpc.solvers import engine as E
+
+    rng = np.random.default_rng(0)
+    N, n, m = 128, 9, 1
+    lo = rng.uniform(-1, 0, (N, n + m))
+    hi = lo + rng.uniform(0.01, 0.5, (N, n + m))
+    lo[:, 4], hi[:, 4] = np.inf, np.inf  # a NaN width (inf - inf) in one coordinate
+    g = np.arange(N)
+
+    def fr():
+        return PairFrontier(lo.copy(), hi.copy(), g.copy(), n, np.ones(n), np.ones(m), 0.05,
+                            4)
+
+    A, B = fr(), fr()
+    labels = rng.choice(np.array([INNER, OUTER, UNDECIDED], dtype=np.int8), N)
+    ra = A.reduce(labels, 0.05)
+    saved = E._GROUP_MIN
+    E._GROUP_MIN = 10 ** 9
+    try:
+        rb = B.reduce(labels, 0.05)
+        c2, s2 = B.take(np.arange(0, N, 2)).split()
+    finally:
+        E._GROUP_MIN = saved
+    assert np.array_equal(ra[0], rb[0]) and np.array_equal(ra[1], rb[1])
+    c1, s1 = A.split_selected(np.arange(0, N, 2))
     assert _same_frontier(c1, c2) and _same_frontier(s1, s2)
