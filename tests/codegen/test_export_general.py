@@ -220,6 +220,9 @@ def test_ipopt_variant_builds_and_agrees(tri, tmp_path):
     assert n >= 40
 
 
+# the controllers below run a sequence computed for another form of the model (on purpose:
+# only the export's refusal is under test), which they say in a warning
+@pytest.mark.filterwarnings("ignore:the sequence was computed for model")
 def test_a_robust_controller_of_a_model_not_affine_in_w_is_refused(tri, tmp_path):
     """The C check evaluates the vertices of W: for a model not affine in w they do not
     bound the image (here the worst w is inside W), so the export is refused whichever
