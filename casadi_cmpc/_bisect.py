@@ -31,26 +31,51 @@ __all__: list[str] = []
 # box, and the halves of each box. Every operation is the one numpy performs below (IEEE
 # double, no contraction), so both give the same bits; numpy answers where no compiler is
 # found and while the loop compiles.
-_BISECT_C = r"""
+#: The rules as C functions, for every C loop that bisects (this module's and the pair
+#: frontier's): ``cmpc_widest_row`` (the first widest coordinate of one box and its width,
+#: widths divided by ``sc`` unless it is NULL; a NaN width propagates to the width, as
+#: numpy.maximum does, and does not take the index) and ``cmpc_cut`` (the cut of [a, b] at
+#: ratio r, ``0.5 a + 0.5 b`` for ``mid``, with the fallbacks of :func:`cut_points`).
+RULES_C = r"""
 #include <stdint.h>
 #include <math.h>
+static inline int64_t cmpc_widest_row(const double *l, const double *h, const double *sc,
+                                      int64_t n, double *width)
+{
+    double b = h[0] - l[0];
+    if (sc) b = b / sc[0];
+    int64_t kk = 0;
+    for (int64_t j = 1; j < n; ++j) {
+        double w = h[j] - l[j];
+        if (sc) w = w / sc[j];
+        if (w > b) kk = j;
+        if (w > b || isnan(w)) b = w;  /* numpy.maximum: a NaN propagates */
+    }
+    *width = b;
+    return kk;
+}
+static inline int cmpc_cut(double a, double b, double r, int mid, double *cut)
+{
+    double c = mid ? 0.5 * a + 0.5 * b : a + r * (b - a);
+    int good = (a < c) && (c < b);
+    if (!good) {
+        c = (1.0 - r) * a + r * b;  /* b - a may overflow for huge boxes */
+        good = (a < c) && (c < b);
+    }
+    if (!good) {  /* a few ulps wide: the float after a, if it lies below b */
+        c = nextafter(a, INFINITY);
+        good = (a < c) && (c < b);
+    }
+    *cut = c;
+    return good;
+}
+"""
+_BISECT_C = RULES_C + r"""
 void cmpc_widest(int64_t N, int64_t n, int64_t ld, const double *lo, const double *hi,
                  const double *scale, double *best, int64_t *k)
 {
-    for (int64_t i = 0; i < N; ++i) {
-        const double *l = lo + i * ld, *h = hi + i * ld;
-        double b = h[0] - l[0];
-        if (scale) b = b / scale[0];
-        int64_t kk = 0;
-        for (int64_t j = 1; j < n; ++j) {
-            double w = h[j] - l[j];
-            if (scale) w = w / scale[j];
-            if (w > b) kk = j;
-            if (w > b || isnan(w)) b = w;  /* numpy.maximum: a NaN propagates */
-        }
-        best[i] = b;
-        k[i] = kk;
-    }
+    for (int64_t i = 0; i < N; ++i)
+        k[i] = cmpc_widest_row(lo + i * ld, hi + i * ld, scale, n, best + i);
 }
 void cmpc_bisect(int64_t N, int64_t n, const double *lo, const double *hi, const int64_t *k,
                  double r, int64_t mid, double *lo2, double *hi2, unsigned char *ok)
@@ -63,20 +88,10 @@ void cmpc_bisect(int64_t N, int64_t n, const double *lo, const double *hi, const
             h1[d] = h2[d] = hi[i * n + d];
         }
         const int64_t j = k[i];
-        const double a = lo[i * n + j], b = hi[i * n + j];
-        double c = mid ? 0.5 * a + 0.5 * b : a + r * (b - a);
-        int good = (a < c) && (c < b);
-        if (!good) {
-            c = (1.0 - r) * a + r * b;
-            good = (a < c) && (c < b);
-        }
-        if (!good) {
-            c = nextafter(a, INFINITY);
-            good = (a < c) && (c < b);
-        }
+        double c;
+        ok[i] = (unsigned char)cmpc_cut(lo[i * n + j], hi[i * n + j], r, (int)mid, &c);
         h1[j] = c;
         l2[j] = c;
-        ok[i] = (unsigned char)good;
     }
 }
 """

@@ -31,7 +31,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._bisect import _COLUMN_MAX, bisect_widest, widest_of
+from .._bisect import _COLUMN_MAX, RULES_C, bisect_widest, widest_of
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
 from ..interval._native import address, c_function
@@ -517,7 +517,8 @@ def _dense_ids(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # Per-group reductions of the pair frontiers as C loops (numpy's ufunc.at is slow); the
 # numpy code gives the same answers where no compiler is found and while these compile.
-_GROUP_C = r"""
+# Widths and cuts follow the one bisection rule of casadi_cmpc._bisect (its RULES_C).
+_GROUP_C = RULES_C + r"""
 #include <stdint.h>
 #include <math.h>
 void cmpc_group_first(int64_t N, const int64_t *g, const unsigned char *mask, int64_t *first)
@@ -537,22 +538,6 @@ void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
         }
     }
 }
-/* the widest coordinate of [l, h] (n coordinates, widths divided by sc) and its width
- * (*w): cmpc_widest's rule (a NaN width propagates) */
-static int64_t pair_widest(const double *l, const double *h, const double *sc, int64_t n,
-                           double *wid)
-{
-    double b = (h[0] - l[0]) / sc[0];
-    int64_t kk = 0;
-    for (int64_t j = 1; j < n; ++j) {
-        double w = (h[j] - l[j]) / sc[j];
-        if (w > b) kk = j;
-        if (w > b || w != w) b = w;
-    }
-    *wid = b;
-    return kk;
-}
-
 /* PairFrontier.reduce: group labels from pair labels (1 inner, -1 outer, 0 undecided,
  * 2 dropped), in three passes, and per pair whether its cell can be split (u_can: widest
  * relative control width above u_eps); cnt, n_in, n_out, n_live, n_split, first_in,
@@ -570,8 +555,8 @@ void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char 
     for (int64_t i = 0; i < N; ++i) {
         int64_t k = g[i];
         double wx, wu = 0.0;
-        (void)pair_widest(lo + i * d, hi + i * d, x_scale, n, &wx);
-        if (d > n) (void)pair_widest(lo + i * d + n, hi + i * d + n, u_scale, d - n, &wu);
+        (void)cmpc_widest_row(lo + i * d, hi + i * d, x_scale, n, &wx);
+        if (d > n) (void)cmpc_widest_row(lo + i * d + n, hi + i * d + n, u_scale, d - n, &wu);
         u_can[i] = (unsigned char)(d > n && wu > u_eps);
         cnt[k] += 1;
         if (lab[i] == 1) { n_in[k] += 1; if (first_in[k] == N) first_in[k] = i; }
@@ -609,23 +594,6 @@ void cmpc_pair_reduce(int64_t N, int64_t G, const int64_t *g, const signed char 
     }
 }
 
-/* the cut of [a, b] at r (mid: 0.5 a + 0.5 b): cmpc_bisect's rule; returns a < c < b */
-static int pair_cut(double a, double b, double r, int mid, double *c)
-{
-    double x = mid ? 0.5 * a + 0.5 * b : a + r * (b - a);
-    int good = (a < x) && (x < b);
-    if (!good) {
-        x = (1.0 - r) * a + r * b;
-        good = (a < x) && (x < b);
-    }
-    if (!good) {
-        x = nextafter(a, INFINITY);
-        good = (a < x) && (x < b);
-    }
-    *c = x;
-    return good;
-}
-
 /* PairFrontier.split of the pairs sel (M indices, increasing) of a frontier (N pairs of d
  * coordinates, n of them the state): children (at most 2 M rows) and stuck state boxes (at
  * most M rows), with the source pair of each row (its data) and its group. Scratch: G
@@ -651,9 +619,9 @@ void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
         if (mode[i]) {
             if (can[i]) {
                 double wu;
-                const int64_t j = n + pair_widest(l + n, h + n, u_scale, m, &wu);
+                const int64_t j = n + cmpc_widest_row(l + n, h + n, u_scale, m, &wu);
                 pk[t] = j;
-                pok[t] = (unsigned char)pair_cut(l[j], h[j], 0.5, 1, pc + t);
+                pok[t] = (unsigned char)cmpc_cut(l[j], h[j], 0.5, 1, pc + t);
                 if (pok[t]) n_uok++; else n_keep2++;
             } else {
                 n_keep1++;
@@ -670,8 +638,8 @@ void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
     for (int64_t k = 0; k < G; ++k) {
         if (first[k] < 0) continue;
         double wx;
-        gk[k] = pair_widest(glo + k * d, ghi + k * d, x_scale, n, &wx);
-        gok[k] = (unsigned char)pair_cut(glo[k * d + gk[k]], ghi[k * d + gk[k]], x_ratio,
+        gk[k] = cmpc_widest_row(glo + k * d, ghi + k * d, x_scale, n, &wx);
+        gok[k] = (unsigned char)cmpc_cut(glo[k * d + gk[k]], ghi[k * d + gk[k]], x_ratio,
                                          x_ratio == 0.5, gc + k);
         if (gok[k]) g2++; else n_stuck++;
     }
