@@ -371,21 +371,20 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
             out_part = _untag(take_done(i_out)) if keep_outer and i_out.size else None
             small_part = _untag(take_done(i_small)) if i_small.size else None
             stuck_part = None
-            split_selected = getattr(frontier, "split_selected", None)
-            grow = frontier.take(i_grow) if split_selected is None or not i_grow.size \
-                else None
-            if grow is not None and not len(grow):
-                nxt = grow
+            if not i_grow.size:
+                nxt = frontier.take(i_grow)
             elif splits:
-                # the growing elements split (without gathering them first where the
-                # frontier can: the same children)
-                nxt, stuck = split_selected(i_grow) if grow is None else grow.split()
+                # the growing elements split (a frontier may do it without gathering them
+                # first: the same children)
+                split_selected = getattr(frontier, "split_selected", None)
+                nxt, stuck = (split_selected(i_grow) if split_selected is not None
+                              else frontier.take(i_grow).split())
                 if len(stuck):  # too narrow for floating point: undecided for good
                     if tagged:
                         stuck = stuck.take(np.argsort(stuck.data[_PART], kind="stable"))
                     stuck_part = _untag(stuck)
             else:
-                nxt = grow.bisect()
+                nxt = frontier.take(i_grow).bisect()
             n_bnd = sum(len(p) for p in (small_part, stuck_part) if p is not None)
             # commit the level in one assignment statement
             done, frontier, n_classified = done + [
@@ -526,17 +525,21 @@ void cmpc_group_first(int64_t N, const int64_t *g, const unsigned char *mask, in
     for (int64_t i = N - 1; i >= 0; --i)
         if (mask[i]) first[g[i]] = i;
 }
+/* [a, b] := hull of [a, b] and [l, h] (d coordinates; numpy.minimum / maximum: a NaN
+ * propagates) */
+static inline void cmpc_hull_add(double *a, double *b, const double *l, const double *h,
+                                 int64_t d)
+{
+    for (int64_t j = 0; j < d; ++j) {
+        a[j] = (l[j] < a[j] || l[j] != l[j]) ? l[j] : a[j];
+        b[j] = (h[j] > b[j] || h[j] != h[j]) ? h[j] : b[j];
+    }
+}
 void cmpc_group_hull(int64_t N, int64_t d, const int64_t *g, const double *lo,
                      const double *hi, double *glo, double *ghi)
 {
-    for (int64_t i = 0; i < N; ++i) {
-        double *a = glo + g[i] * d, *b = ghi + g[i] * d;
-        const double *l = lo + i * d, *h = hi + i * d;
-        for (int64_t j = 0; j < d; ++j) {  /* numpy.minimum / maximum: a NaN propagates */
-            a[j] = (l[j] < a[j] || l[j] != l[j]) ? l[j] : a[j];
-            b[j] = (h[j] > b[j] || h[j] != h[j]) ? h[j] : b[j];
-        }
-    }
+    for (int64_t i = 0; i < N; ++i)
+        cmpc_hull_add(glo + g[i] * d, ghi + g[i] * d, lo + i * d, hi + i * d, d);
 }
 /* PairFrontier.reduce: group labels from pair labels (1 inner, -1 outer, 0 undecided,
  * 2 dropped), in three passes, and per pair whether its cell can be split (u_can: widest
@@ -611,11 +614,10 @@ void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
                      double *slo, double *shi, int64_t *ssrc, int64_t *sgrp, int64_t *counts)
 {
     const int64_t m = d - n;
-    int64_t n_uok = 0, n_keep1 = 0, n_keep2 = 0, g2 = 0, n_stuck = 0, base = -1;
+    int64_t n_uok = 0, n_keep1 = 0, n_keep2 = 0, g2 = 0, n_stuck = 0;
     for (int64_t t = 0; t < M; ++t) {
         const int64_t i = sel[t], k = g[i];
         const double *l = lo + i * d, *h = hi + i * d;
-        if (k > base) base = k;
         if (mode[i]) {
             if (can[i]) {
                 double wu;
@@ -627,12 +629,8 @@ void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
                 n_keep1++;
             }
         } else {
-            double *a = glo + k * d, *b = ghi + k * d;
             if (first[k] < 0) first[k] = i;
-            for (int64_t j = 0; j < d; ++j) {  /* numpy.minimum / maximum: NaN propagates */
-                a[j] = (l[j] < a[j] || l[j] != l[j]) ? l[j] : a[j];
-                b[j] = (h[j] > b[j] || h[j] != h[j]) ? h[j] : b[j];
-            }
+            cmpc_hull_add(glo + k * d, ghi + k * d, l, h, d);
         }
     }
     for (int64_t k = 0; k < G; ++k) {
@@ -695,7 +693,6 @@ void cmpc_pair_split(int64_t M, const int64_t *sel, int64_t d, int64_t n,
     }
     counts[0] = n_uok; counts[1] = n_keep1; counts[2] = n_keep2; counts[3] = g2;
     counts[4] = n_stuck; counts[5] = n_pu;
-    (void)base;
 }
 """
 _GROUP_MIN = 64  # smaller batches stay in numpy (the C call's fixed cost)
