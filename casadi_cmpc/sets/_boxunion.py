@@ -251,10 +251,12 @@ static int64_t upper_bound(const double *e, int64_t m, double x, double glo, dou
     return lo;
 }
 
-void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
-                     const int64_t *off, const int64_t *table, const int64_t *stride,
-                     int64_t contains, int8_t *out, const double *glo, const double *ginv,
-                     const int64_t *hints, const int64_t *hoff)
+/* one loop over the queries; n is a constant where the dispatcher below inlines it, so
+   that the loops over the coordinates and the 2**n corners are unrolled */
+static inline __attribute__((always_inline)) void grid_query(
+    int64_t N, const int64_t n, const double *q, const double *edges, const int64_t *off,
+    const int64_t *table, const int64_t *stride, int64_t contains, int8_t *out,
+    const double *glo, const double *ginv, const int64_t *hints, const int64_t *hoff)
 {
     int64_t a[32], b[32];
     for (int64_t k = 0; k < N; k++) {
@@ -301,6 +303,23 @@ void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
         }
         out[k] = contains ? (tot == vol) : (tot > 0);
     }
+}
+
+void cmpc_grid_query(int64_t N, int64_t n, const double *q, const double *edges,
+                     const int64_t *off, const int64_t *table, const int64_t *stride,
+                     int64_t contains, int8_t *out, const double *glo, const double *ginv,
+                     const int64_t *hints, const int64_t *hoff)
+{
+#define CMPC_GQ(NN) grid_query(N, NN, q, edges, off, table, stride, contains, out, glo, \
+                               ginv, hints, hoff)
+    switch (n) {
+    case 1: CMPC_GQ(1); break;
+    case 2: CMPC_GQ(2); break;
+    case 3: CMPC_GQ(3); break;
+    case 4: CMPC_GQ(4); break;
+    default: CMPC_GQ(n);
+    }
+#undef CMPC_GQ
 }
 """
 _GRID_MAX_N = 16  # dimensions of the C loop (2**n look-ups per query)
@@ -452,7 +471,13 @@ class _BoxGrid:
         self._glo, self._ginv = glo, ginv
         self._hints = np.ascontiguousarray(np.concatenate(hints), dtype=np.int64)
         self._hoff = np.cumsum([0] + [h.size for h in hints]).astype(np.int64)
+        self._addr = None  # the addresses of the arrays above for the C loop
         return self
+
+    def __getstate__(self) -> dict[str, Any]:
+        # a copy (a pickle sent to a worker, copy.copy) has arrays of its own: the addresses
+        # of these are not its addresses
+        return {**self.__dict__, "_addr": None}
 
     def _native(self, Q: np.ndarray, contains: bool) -> np.ndarray | None:
         """The C loop's answers for the queries ``Q`` (N, n, 2), or None (no kernel)."""
@@ -462,12 +487,14 @@ class _BoxGrid:
         fn = _grid_kernel()
         if fn is None:
             return None
-        Q = np.ascontiguousarray(Q, dtype=np.float64)
-        out = np.empty(Q.shape[0], dtype=np.int8)
         from ..interval._native import address as a
 
-        fn(Q.shape[0], n, a(Q), a(self._edges_cat), a(self._off), a(self.table), a(self._stride),
-           int(contains), a(out), a(self._glo), a(self._ginv), a(self._hints), a(self._hoff))
+        Q = np.ascontiguousarray(Q, dtype=np.float64)
+        out = np.empty(Q.shape[0], dtype=np.int8)
+        if self._addr is None:  # the addresses of the index's arrays (never modified)
+            self._addr = ((a(self._edges_cat), a(self._off), a(self.table), a(self._stride)),
+                          (a(self._glo), a(self._ginv), a(self._hints), a(self._hoff)))
+        fn(Q.shape[0], n, a(Q), *self._addr[0], int(contains), a(out), *self._addr[1])
         return out.view(bool)
 
     def polytope_inside(self, P: Any) -> bool:

@@ -49,7 +49,7 @@ def _grid_c_loaded() -> bool:
 
 
 @settings(max_examples=120, deadline=None)
-@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 4), k=st.integers(1, 300),
+@given(seed=st.integers(0, 10 ** 6), n=st.integers(1, 6), k=st.integers(1, 300),
        scale=st.sampled_from([1.0, 1e-3, 37.0, 0.1, 1e-300, 2.0 ** -1070, 1e150, 1e300]),
        shift=st.sampled_from([0.0, -5.0, 1e3, 1e-310]))
 def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
@@ -93,6 +93,16 @@ def test_c_grid_query_equals_the_numpy_code(seed, n, k, scale, shift):
     assert (got_c == ref_c).all()
     assert (got_i == ref_i).all()
     assert G.intersects(Q)[~np.isfinite(Q).all(axis=(1, 2))].all()
+    # a copy of a used index (as sent to a worker process) queries its own arrays: the
+    # original freed and its memory reused must not change the copy's answers
+    import pickle
+
+    G2 = pickle.loads(pickle.dumps(G))
+    del G
+    junk = [np.full(a.shape, -7, dtype=a.dtype) for a in (G2.table, G2._edges_cat)]
+    assert (G2._native(Q[fat], True) == ref_c).all()
+    assert (G2.intersects(Q) == ref_i).all()
+    del junk
 
 
 @settings(max_examples=200, deadline=None)
