@@ -205,7 +205,7 @@ class _Target:
                 Yu = Y[und]
                 grid = None if self.boxes is None else self.boxes._grid("inner", und.size)
                 if grid is not None and not self.zonos:
-                    # the exact grid index answers False for a non-finite (or NaN) enclosure
+                    # the exact grid index answers False for a non-finite enclosure
                     got = grid.contains(Yu)
                 else:
                     fin = np.isfinite(Yu).all(axis=(1, 2))
@@ -230,7 +230,7 @@ class _Target:
             Yi = Y[idx]
             grid = None if self.boxes is None else self.boxes._grid("inner", idx.size)
             if grid is not None and not self.zonos:
-                # the exact grid index answers True for a non-finite (or NaN) enclosure
+                # the exact grid index: True for a NaN enclosure, exact for infinite bounds
                 meet = grid.intersects(Yi)
             else:
                 meet = ~np.isfinite(Yi).all(axis=(1, 2))

@@ -269,7 +269,7 @@ static inline __attribute__((always_inline)) void grid_query(
             const int64_t m = off[j + 1] - off[j];
             const int64_t *h = hints + hoff[j], K = hoff[j + 1] - hoff[j] - 1;
             int64_t aj, bj;
-            if (!isfinite(lo) || !isfinite(hi)) fin = 0;
+            if (lo != lo || hi != hi) fin = 0;  /* NaN: possibly anything */
             if (m == 1) {  /* every box flat in j */
                 if (contains) ok = 0; else ok &= (hi >= e[0]) && (lo <= e[0]);
                 aj = 0; bj = 1;
@@ -573,7 +573,8 @@ class _BoxGrid:
 
     def intersects(self, Q: np.ndarray) -> np.ndarray:
         """Exact ``Q[i] ∩ union ≠ ∅`` (closed boxes) for query boxes ``Q`` (N, n, 2): (N,)
-        bool; True for a query with an infinite bound."""
+        bool; exact for infinite bounds too, True for a query with a NaN bound (an
+        enclosure that may be anything)."""
         got = self._native(Q, False)
         if got is None:
             got = self._intersects_numpy(Q)
@@ -585,7 +586,7 @@ class _BoxGrid:
     def _intersects_numpy(self, Q: np.ndarray) -> np.ndarray:
         """:meth:`intersects` against the cells of the grid (the flat boxes aside)."""
         n = Q.shape[1]
-        fin = np.isfinite(Q).all(axis=(1, 2))
+        known = ~np.isnan(Q).any(axis=(1, 2))
         meet = np.ones(Q.shape[0], dtype=bool)
         i0, i1 = [], []
         for j in range(n):
@@ -603,7 +604,7 @@ class _BoxGrid:
             i0.append(a)
             i1.append(b)
         got = meet & (self._count(i0, i1) > 0)
-        return np.where(fin, got, True)
+        return np.where(known, got, True)
 
 
 def _compact_union(U: np.ndarray) -> np.ndarray:

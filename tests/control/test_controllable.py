@@ -736,8 +736,11 @@ def test_target_rows_up_to_sign_describe_the_same_polytope():
 
 def test_box_union_target_tests_on_undefined_and_infinite_enclosures():
     """The target tests of a box union (through its exact grid index) on enclosures with
-    NaN (possibly undefined) or infinite bounds: never inside, never proven outside; on
-    finite enclosures the exact answers of the union's own contains / intersects tests."""
+    NaN (possibly undefined) bounds: never inside, never proven outside; with infinite
+    bounds (a real beyond the largest float, as the evaluators return them: a lower bound
+    is never +inf, an upper one never -inf) never inside the bounded union and proven
+    outside exactly when the closed query misses it; on finite enclosures the exact
+    answers of the union's own contains / intersects tests."""
     from casadi_cmpc.control.controllable import _Target
 
     x = ca.SX.sym("x", 2)
@@ -754,12 +757,19 @@ def test_box_union_target_tests_on_undefined_and_infinite_enclosures():
     Y = np.stack([c - 0.03, c + 0.03], -1)
     Y[:40, 0, 0] = np.nan
     Y[40:60, 1, 1] = np.inf
-    Y[60:70, 0, :] = -np.inf
+    Y[60:70, 0, 0] = -np.inf
     Y[70:80] = np.nan
+    Y[80:90, 1, 1] = np.inf
+    Y[80:85, 1, 0] = 5.0  # [5, inf]: misses the union
     bad = ~np.isfinite(Y).all(axis=(1, 2))
+    nan = np.isnan(Y).any(axis=(1, 2))
     inside = T.inside_of([], Y)
     outside = T.outside_of([], Y)
-    assert not inside[bad].any() and not outside[bad].any()
+    assert not inside[bad].any() and not outside[nan].any()
+    inf = bad & ~nan
+    meets = ((Y[inf][:, None, :, 0] <= P.inner[None, :, :, 1])
+             & (P.inner[None, :, :, 0] <= Y[inf][:, None, :, 1])).all(axis=2).any(axis=1)
+    assert np.array_equal(outside[inf], ~meets) and outside[80:85].all()
     fin = ~bad
     assert np.array_equal(inside[fin], P.contains_box(Y[fin], view="inner"))
     assert np.array_equal(outside[fin], ~P.intersects_box(Y[fin], view="inner"))
