@@ -253,11 +253,13 @@ def _until(ex: Any, cfg: dict) -> np.ndarray | None:
 
 
 def _affine_state_controller(ex: Any, progress: bool | None, eps: float | None = None,
-                             solver: str | None = None) -> tuple[Any, Any]:
+                             solver: str | None = None, executor: Any = None
+                             ) -> tuple[Any, Any]:
     """E11's pipeline (thesis §6.2): T proven robustly invariant under the local law
-    (:func:`certify_invariant`, inside :func:`controllable_sets`), the polytopic robust
-    controllable sets of the affine-state method (Alg 6.4-6.6) to convergence, and the
-    robust one-step MPC along them (:class:`SetSequenceMPC`)."""
+    (:func:`certify_invariant`, inside :func:`controllable_sets`, on ``executor`` when
+    given), the polytopic robust controllable sets of the affine-state method (Alg
+    6.4-6.6) to convergence, and the robust one-step MPC along them
+    (:class:`SetSequenceMPC`)."""
     from .control.controllable import controllable_sets
     from .mpc.sequence import SetSequenceMPC
 
@@ -270,7 +272,8 @@ def _affine_state_controller(ex: Any, progress: bool | None, eps: float | None =
                                 method="affine_state", law=ex.local_law,
                                 polytopic_method=cfg.get("polytopic_method", "separating"),
                                 max_steps=int(cfg.get("max_steps", 100)),
-                                until=_until(ex, cfg), progress=progress)
+                                until=_until(ex, cfg), progress=progress,
+                                executor=executor)
         print(f"affine-state controllable sets (Alg 6.4-6.6) computed in "
               f"{time.perf_counter() - t0:.1f} s ({seq.status})")
         if seq.status in _COMPLETE:
@@ -290,11 +293,12 @@ def _affine_state_controller(ex: Any, progress: bool | None, eps: float | None =
 
 
 def _quasi_controller(ex: Any, progress: bool | None, eps: float | None = None,
-                      solver: str | None = None) -> tuple[Any, Any]:
+                      solver: str | None = None, executor: Any = None) -> tuple[Any, Any]:
     """E12's pipeline (thesis §6.3): T proven robustly invariant under the local law
     (:func:`certify_invariant` and ``T ⊆ X`` by rigorous support bounds), the recursion of
     polytopic quasi i-step robust controllable sets (Alg 6.7, §6.3.4) to convergence, and
-    :class:`QuasiMultiStepMPC` (Alg 6.8) along them."""
+    :class:`QuasiMultiStepMPC` (Alg 6.8) along them; the searches on ``executor`` when
+    given."""
     from .control.controllable import _check_terminal, _terminal_info
     from .control.quasi import quasi_controllable_sets
     from .mpc.quasi import QuasiMultiStepMPC
@@ -308,7 +312,7 @@ def _quasi_controller(ex: Any, progress: bool | None, eps: float | None = None,
         # T in X (rigorous support bounds) and robustly invariant under the local law
         # (certify_invariant at resolutions relative to T); a clean exit when not proven
         cert = _check_terminal(model, ex.terminal, ex.local_law, None, False, True,
-                               cfg["eps"], model.X)
+                               cfg["eps"], model.X, executor)
         t_cert = time.perf_counter() - t0
         print(f"terminal set proven robustly invariant under the local law in {t_cert:.1f} s"
               f": {cert.claim}")
@@ -317,7 +321,7 @@ def _quasi_controller(ex: Any, progress: bool | None, eps: float | None = None,
             model, ex.terminal, int(cfg["steps"]), cfg["eps"],
             max_sets=int(cfg.get("max_sets", 30)),
             polytopic_method=cfg.get("polytopic_method", "separating"),
-            until=_until(ex, cfg), progress=progress)
+            until=_until(ex, cfg), progress=progress, executor=executor)
         seqs.info.update({"terminal_certificate": cert.label, "robust": model.l > 0,
                           "terminal_seconds": t_cert, **_terminal_info(model, cert)})
         print(f"quasi {seqs.steps}-step robust controllable sets (Alg 6.7) computed in "
@@ -349,13 +353,13 @@ def _controller(ex: Any, kind: str = "auto", cache: str | None = None,
         raise ValueError(f"example '{ex.name}' has no controllable-set configuration; use "
                          "--controller contractive")
     if kind in ("auto", "sequence") and pipeline is not None:
-        if pipeline != "sequence" and (checkpoint is not None or executor is not None):
-            raise ValueError(f"--checkpoint, --workers and --scheduler are for the general "
-                             f"controllable sets; '{ex.name}' runs the {pipeline} pipeline")
+        if pipeline != "sequence" and checkpoint is not None:
+            raise ValueError(f"--checkpoint is for the general controllable sets; "
+                             f"'{ex.name}' runs the {pipeline} pipeline")
         if pipeline == "quasi":
-            return _quasi_controller(ex, progress, eps)
+            return _quasi_controller(ex, progress, eps, executor=executor)
         if pipeline == "affine_state":
-            return _affine_state_controller(ex, progress, eps)
+            return _affine_state_controller(ex, progress, eps, executor=executor)
         return _sequence_controller(ex, cache, progress, checkpoint=checkpoint,
                                     executor=executor, eps=eps)
     if eps is not None:

@@ -1063,9 +1063,10 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
         ``polytopic`` is implied). A state of ``P_i`` outside ``P_{i-1}`` reaches
         ``P_{i-1}`` in one step for all w; the sets need not be nested (``level(x)`` is the
         smallest i with x in ``P_i``). The recursion stops when a polytope grows by less
-        than 0.1 % in volume (``converged_at``). ``obstacles``, ``checkpoint`` and
-        ``executor`` are for ``"general"``; ``max_boxes`` bounds the (x_NL box, control)
-        pairs of a step.
+        than 0.1 % in volume (``converged_at``). ``obstacles`` and ``checkpoint`` are for
+        ``"general"``; ``executor`` serves the proof of T here (the grid of each step runs
+        in this process: it takes milliseconds to seconds); ``max_boxes`` bounds the (x_NL
+        box, control) pairs of a step.
 
     Returns
     -------
@@ -1119,8 +1120,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     if meth == "affine_state":
         from .affine_state import affine_state_sequence
 
-        if obs or checkpoint is not None or executor is not None:
-            raise ValueError("obstacles, checkpoint and executor are for method='general'")
+        if obs or checkpoint is not None:
+            raise ValueError("obstacles and checkpoint are for method='general'")
         if not 0 < u_eps <= 1:
             raise ValueError(f"u_eps must be in (0, 1]; got {u_eps}")
         cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D,

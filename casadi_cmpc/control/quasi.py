@@ -18,14 +18,14 @@ one-step sets against one quasi two-step set).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .._bisect import bisect_widest
 from .._validate import as_boxes
-from ..exceptions import DimensionError, ModelError
+from ..exceptions import CmpcWarning, DimensionError, ModelError
 from ..model import Model
 from ..sets import _lp
 from ..sets._reach import (
@@ -40,7 +40,7 @@ from ..sets.box import Box
 from ..sets.paving import Paving
 from ..sets.polytope import Polytope
 from ..solvers._common import positive_eps
-from ..solvers.engine import Status
+from ..solvers.engine import INNER, OUTER, BoxFrontier, Status, branch_and_bound
 from ..solvers.result import SetResult
 
 __all__ = ["QuasiSet", "QuasiSequence", "quasi_controllable_set", "quasi_controllable_sets",
@@ -371,11 +371,39 @@ class _Quasi:
         return ctrl, arrival, ok
 
 
+class _QuasiClassifier:
+    """Alg 6.7 as a classifier of the branch and bound: a box is OUTER when the target is
+    proven missed at every step for all controls (Step 5), INNER when the control sequence
+    of the LPs is proven to bring the whole box into the target (Steps 6-16; the sequence
+    and the arrival step are stored in the frontier's data ``controls`` (N, i, m) and
+    ``arrival`` (N,)), else undecided. Each box is labelled from itself alone (the LP of a
+    box does not depend on the others of its batch with one input: a closed form; with
+    several inputs a tie between optimal LP vertices may be broken differently in another
+    batch, which a proof then checks like any other choice)."""
+
+    def __init__(self, Q: _Quasi) -> None:
+        self.Q = Q
+
+    def __call__(self, fr: BoxFrontier) -> np.ndarray:
+        boxes = fr.boxes
+        labels = np.zeros(len(fr), dtype=np.int8)
+        possible = self.Q.reachable(boxes)
+        labels[~possible] = OUTER
+        cand = np.flatnonzero(possible)
+        if cand.size:
+            ctrl, arrival, ok = self.Q.controls_and_check(boxes[cand])
+            won = cand[ok]
+            labels[won] = INNER
+            fr.data["controls"][won] = ctrl[ok]
+            fr.data["arrival"][won] = arrival[ok]
+        return labels
+
+
 def quasi_controllable_set(model: Model, target: Any, steps: int, eps: float, *,
                            X: Any = None, W: Any = None, refine: bool = True,
                            max_order: float | None = None, inclusion: str = "natural",
                            max_boxes: int = 1_000_000, time_limit: float | None = None,
-                           progress: bool | None = None) -> QuasiSet:
+                           progress: bool | None = None, executor: Any = None) -> QuasiSet:
     r"""Inner approximation of the quasi i-step robust controllable set (Alg 6.7).
 
     Parameters
@@ -404,12 +432,23 @@ def quasi_controllable_set(model: Model, target: Any, steps: int, eps: float, *,
         Budget (boxes classified; seconds). A stopped search is sound: the unexplored
         boxes are boundary and the status is BUDGET.
     progress : bool or None
-        tqdm bar over the bisection levels.
+        tqdm bar over the boxes classified.
+    executor : concurrent.futures.Executor, optional
+        Run the search below its first levels on worker processes (a
+        ``ProcessPoolExecutor``, or ``distributed.Client(...).get_executor()``); the same
+        boxes, controls and arrival steps as the serial search (see
+        :func:`casadi_cmpc.solvers.engine.branch_and_bound`). With several inputs (a
+        :class:`~casadi_cmpc.CmpcWarning` says so) the LP may pick another of a box's
+        equally good controls in another batch, so the sets may then differ from the
+        serial run's (each is proven).
 
     Returns
     -------
     QuasiSet
-        ``paving``, ``controls`` (N_inner, steps, m), ``arrival``, ``semantics``, status.
+        ``paving``, ``controls`` (N_inner, steps, m), ``arrival``, ``semantics``, status
+        (PROVED: the search ran to completion and proved some box; UNDECIDED: it ran to
+        completion without proving a box; DISPROVED: every box is proven outside; BUDGET:
+        a limit stopped it).
 
     Notes
     -----
@@ -441,8 +480,6 @@ def quasi_controllable_set(model: Model, target: Any, steps: int, eps: float, *,
     >>> K2.controls.shape[1:], bool(K2.n_inner > 0)
     ((2, 1), True)
     """
-    from tqdm.auto import tqdm
-
     t0 = time.perf_counter()
     _check_model(model)
     i = _check_steps(steps)
@@ -460,75 +497,39 @@ def quasi_controllable_set(model: Model, target: Any, steps: int, eps: float, *,
         raise ValueError(f"max_order must be >= 1; got {max_order}")
     Dar = D.as_array()
     Q = _Quasi(model, T, i, Wb, Dar, bool(refine), max_order, str(inclusion).lower())
-    n, m = model.n, model.m
-    frontier = Dar[None].copy()
-    inner, bound, outside = [], [], []
-    ctrls, arrs = [], []
-    history: list[dict[str, int]] = []
-    status, why = Status.PROVED, "the search ran to completion"
-    n_boxes, levels = 0, 0
-    bar = tqdm(total=None, desc=f"quasi {i}-step set", unit="level",
-               disable=progress is False, delay=0 if progress else 2.0, leave=False)
-    try:
-        while frontier.shape[0]:
-            if n_boxes + frontier.shape[0] > max_boxes:
-                status, why = Status.BUDGET, f"max_boxes = {max_boxes} reached"
-                break
-            if time_limit is not None and time.perf_counter() - t0 > time_limit:
-                status, why = Status.BUDGET, f"time_limit = {time_limit} s reached"
-                break
-            levels += 1
-            n_boxes += frontier.shape[0]
-            possible = Q.reachable(frontier)
-            outside.append(frontier[~possible])
-            cand = frontier[possible]
-            ctrl, arr, ok = Q.controls_and_check(cand)
-            inner.append(cand[ok])
-            ctrls.append(ctrl[ok])
-            arrs.append(arr[ok])
-            rest = cand[~ok]
-            wide = (rest[..., 1] - rest[..., 0]).max(axis=1) > eps if rest.size else \
-                np.zeros(0, dtype=bool)
-            bound.append(rest[~wide])
-            history.append({"boxes": int(frontier.shape[0]), "inner": int(ok.sum()),
-                            "outer": int((~possible).sum()), "boundary": int((~wide).sum())})
-            split = rest[wide]
-            if split.shape[0]:
-                lo2, hi2, _, cut = bisect_widest(np.ascontiguousarray(split[..., 0]),
-                                                 np.ascontiguousarray(split[..., 1]))
-                good = np.concatenate([cut, cut])
-                nb = np.stack([lo2, hi2], axis=-1)
-                bound.append(split[~cut])  # a box that cannot be cut stays undecided
-                frontier = nb[good]
-            else:
-                frontier = np.zeros((0, n, 2))
-            bar.update(1)
-    except KeyboardInterrupt:
-        status, why = Status.BUDGET, "interrupted"
-    finally:
-        bar.close()
-    if status != Status.PROVED:
-        bound.append(frontier)
-
-    def cat(parts: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
-        parts = [p for p in parts if p.size]
-        return np.concatenate(parts) if parts else np.zeros((0, *shape))
-
-    I = cat(inner, (n, 2))
-    pav = Paving(inner=I, boundary=cat(bound, (n, 2)), outside=cat(outside, (n, 2)),
+    m = model.m
+    if executor is not None and m > 1:
+        warnings.warn(
+            "with several inputs, the LP (6.20)-(6.21) of a box may return another of its "
+            "equally good controls when the box is solved in another batch (on a worker), "
+            "so the sets may differ from the serial run's in such boxes; every box is "
+            "proven either way", CmpcWarning, stacklevel=2)
+    fr = BoxFrontier.from_boxes(Dar[None])
+    fr.data = {"controls": np.full((1, i, m), np.nan), "arrival": np.zeros(1, dtype=np.int64)}
+    fr.keep = ("controls", "arrival")
+    out = branch_and_bound(fr, _QuasiClassifier(Q), eps, max_boxes=max_boxes,
+                           time_limit=None if time_limit is None
+                           else max(0.0, time_limit - (time.perf_counter() - t0)),
+                           progress=progress, desc=f"quasi {i}-step set", executor=executor)
+    status, why = out.status, out.message
+    pav = Paving(inner=out.inner.boxes, boundary=out.boundary.boxes, outside=out.outer.boxes,
                  domain=D)
-    controls = cat(ctrls, (i, m))
-    arrival = np.concatenate([a for a in arrs]) if arrs else np.zeros(0, dtype=int)
+    data = out.inner.data if len(out.inner) else None
+    controls = np.zeros((0, i, m)) if data is None else data["controls"]
+    arrival = np.zeros(0, dtype=int) if data is None else data["arrival"]
+    history = [{"boxes": h["classified"], "inner": h["inner"], "outer": h["outer"],
+                "boundary": h["boundary"]} for h in out.history]
     semantics = (f"quasi {i}-step robust controllable set (Def 6.1, Alg 6.7) of model "
                  f"'{model.name}': from every state of an inner box its stored control "
                  f"sequence keeps x(k) in X = {D} before arrival and puts x(arrival) in the "
                  f"target (arrival <= {i}), {wtext}")
     msg = (f"{pav.n_inner} boxes proven ({semantics}); {pav.n_boundary} undecided, "
            f"{pav.n_outside} proven outside; {why}")
-    if status == Status.PROVED and pav.n_inner == 0 and pav.n_boundary == 0:
-        status = Status.DISPROVED  # every box proven outside
+    if status == Status.PROVED and pav.n_inner == 0:
+        # nothing proven in the set: empty (every box proven outside) or not known
+        status = Status.UNDECIDED if pav.n_boundary else Status.DISPROVED
     return QuasiSet(status=status, message=msg, method="quasi i-step (Alg 6.7, zonotope "
-                    "evolution + LP (6.20)-(6.21))", nit=levels, n_boxes=n_boxes,
+                    "evolution + LP (6.20)-(6.21))", nit=out.levels, n_boxes=out.n_classified,
                     elapsed=time.perf_counter() - t0, paving=pav, history=history,
                     controls=controls, arrival=arrival.astype(int), steps=i, target=T,
                     semantics=semantics, W=Wb[0].copy(), model_name=model.name)

@@ -37,8 +37,8 @@ from ..exceptions import (
     UnsupportedOperationError,
 )
 from . import _derivative as _dv
+from . import _fpu, arith
 from . import _scalar as _S
-from . import arith
 from ._native import Rows as _Rows
 from ._native import as_arrays as _native_as_arrays
 
@@ -962,6 +962,8 @@ class InclusionFunction:
                           f"    elif s == ({d}, 2): k{i} = 0",
                           "    else: return None"]
             lines.append("    if n > limit or n == 0: return None")
+            # not in the default floating-point environment: the checked path switches
+            lines.append("    if not DEFAULT_FP(): return None")
             for i, d in enumerate(self.size_in):
                 if d == 0:
                     lines.append(f"    L{i} = [[]] * n")
@@ -989,7 +991,7 @@ class InclusionFunction:
             else:
                 lines.append(f"    return ev({args}, n)")
         ns: dict[str, Any] = {"ndarray": np.ndarray, "F64": _F64, "ev": ev,
-                              "fromiter": np.fromiter}
+                              "fromiter": np.fromiter, "DEFAULT_FP": _fpu.is_default}
         exec(compile("\n".join(lines) + "\n", f"<interval-call:{self.fun.name()}>", "exec"),
              ns)  # noqa: S102
         return ns["_fast"]
@@ -1004,6 +1006,8 @@ class InclusionFunction:
                     boxes: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
         """Evaluate boxes given as nested lists (``ndarray.tolist()`` of ``(N_i, d_i, 2)``,
         N_i in {1, n}) with the scalar evaluator; numpy if Python raises."""
+        if not _fpu.is_default():  # the rules hold in the default environment
+            return _fpu.call_in_default(self._run_scalar, lists, n, boxes)
         args = [b if len(b) == n else b * n for b in lists]
         out: list[np.ndarray] | None = None
         try:
@@ -1289,6 +1293,8 @@ class InclusionFunction:
 
     def _numpy(self, boxes: Sequence[np.ndarray], n: int) -> list[np.ndarray]:
         """Evaluate with the numpy evaluators (in chunks for large batches)."""
+        if not _fpu.is_default():  # the rules hold in the default environment
+            return _fpu.call_in_default(self._numpy, boxes, n)
         run = self._natural if self._natural_form() else self._centered
         step = int(self.chunk if run == self._natural else self.chunk_centered)
         if n <= step:

@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import arith
+from . import _fpu, arith
 
 _UNARY_NAMES = [
     "neg", "sq", "twice", "inv", "sqrt", "exp", "expm1", "log", "log1p", "sin", "cos", "tan",
@@ -47,6 +47,8 @@ def _operand(a) -> np.ndarray:
 
 def _unary(core: Callable) -> Callable:
     def f(a):
+        if not _fpu.is_default():  # the rules hold in the default environment
+            return _fpu.call_in_default(f, a)
         a = _operand(a)
         with np.errstate(all="ignore"):
             lo, hi = core(a[..., 0], a[..., 1])
@@ -59,6 +61,8 @@ def _unary(core: Callable) -> Callable:
 
 def _binary(core: Callable) -> Callable:
     def f(a, b):
+        if not _fpu.is_default():
+            return _fpu.call_in_default(f, a, b)
         a = _operand(a)
         b = _operand(b)
         with np.errstate(all="ignore"):
@@ -78,6 +82,8 @@ for _n in _BINARY_NAMES + ["and_", "or_"]:
 
 def constpow(a, c: float) -> np.ndarray:
     """``a ** c`` for a real constant ``c``; a has shape (..., 2)."""
+    if not _fpu.is_default():
+        return _fpu.call_in_default(constpow, a, c)
     a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powc(a[..., 0], a[..., 1], c)
@@ -86,6 +92,8 @@ def constpow(a, c: float) -> np.ndarray:
 
 def powi(a, n: int) -> np.ndarray:
     """``a ** n`` for an integer ``n``; a has shape (..., 2)."""
+    if not _fpu.is_default():
+        return _fpu.call_in_default(powi, a, n)
     a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powi(a[..., 0], a[..., 1], n)

@@ -34,6 +34,7 @@ import numpy as np
 from .._bisect import _COLUMN_MAX, RULES_C, bisect_widest, widest_of
 from .._interrupt import InterruptScope
 from ..exceptions import UnboundedSetError
+from ..interval import _fpu
 from ..interval._native import address, c_function
 from ._common import positive_eps
 from ._parallel import LevelRunner, _two_phase
@@ -109,7 +110,9 @@ class BoxFrontier:
     ``data`` holds optional per-box arrays (first axis N) that travel with the boxes: ``take``
     selects their rows, ``concat`` joins them and both halves of a bisected box inherit the
     row of their parent. A classifier may record there what it proved about a box (e.g. which
-    constraints hold on all of it), which then holds on every descendant as well.
+    constraints hold on all of it), which then holds on every descendant as well. Finished
+    boxes (the records of a search) drop their data, except the keys in ``keep`` (e.g. the
+    control sequence that proves an inner box).
     """
 
     lo: np.ndarray
@@ -119,6 +122,7 @@ class BoxFrontier:
     data: dict[str, np.ndarray] | None = None
     # widest component of each box, kept from width() for split() (same boxes, same order)
     _split_dim: np.ndarray | None = field(default=None, repr=False, compare=False)
+    keep: tuple[str, ...] = ()
 
     @classmethod
     def from_boxes(cls, boxes: np.ndarray, scale: np.ndarray | None = None,
@@ -129,7 +133,7 @@ class BoxFrontier:
 
     def _with(self, lo: np.ndarray, hi: np.ndarray, data: dict[str, np.ndarray] | None,
               split_dim: np.ndarray | None = None) -> BoxFrontier:
-        return BoxFrontier(lo, hi, self.scale, self.split_ratio, data, split_dim)
+        return BoxFrontier(lo, hi, self.scale, self.split_ratio, data, split_dim, self.keep)
 
     def __len__(self) -> int:
         return self.lo.shape[0]
@@ -150,9 +154,12 @@ class BoxFrontier:
         return self._with(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), data, k)
 
     def take_done(self, idx: np.ndarray) -> BoxFrontier:
-        """The boxes at the indices ``idx`` without their per-box data (for finished parts)."""
+        """The boxes at the indices ``idx`` without their per-box data, except the keys of
+        ``keep`` (for finished parts)."""
+        data = None if self.data is None or not self.keep else {
+            key: self.data[key].take(idx, axis=0) for key in self.keep}
         return BoxFrontier(self.lo.take(idx, axis=0), self.hi.take(idx, axis=0), self.scale,
-                           self.split_ratio)
+                           self.split_ratio, data, None, self.keep)
 
     def width(self) -> np.ndarray:
         """Largest component width of each box (relative to ``scale`` when given), (N,)."""
@@ -279,6 +286,12 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     run exceed ``max_boxes``, the search goes on serially from the split level instead
     (the serial result, budget included).
     """
+    if not _fpu.is_default():  # every rounding of the search holds in the default one
+        return _fpu.call_in_default(
+            lambda: branch_and_bound(frontier, classify, eps, max_boxes=max_boxes,
+                                     time_limit=time_limit, keep_outer=keep_outer,
+                                     progress=progress, desc=desc, on_level=on_level,
+                                     executor=executor, _tagged=_tagged, _raw=_raw))
     with warnings.catch_warnings():
         # in a notebook without ipywidgets tqdm.auto warns, then uses the text bar
         warnings.simplefilter("ignore")

@@ -263,3 +263,72 @@ def test_terminal_set_proven_invariant_by_its_quasi_one_step_set(e12):
     # too coarse: not proven, and said so
     coarse = quasi_invariance(e12.model, e12.terminal, eps=0.2)
     assert coarse.proved is None and coarse.label == "undecided"
+
+
+# ----------------------------------------------------------------------------- engine
+class _CountingPool:
+    """A process pool that counts the tasks it was given."""
+
+    def __init__(self, n: int) -> None:
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.pool = ProcessPoolExecutor(n)
+        self._max_workers = n
+        self.tasks = 0
+
+    def submit(self, *a, **k):
+        self.tasks += 1
+        return self.pool.submit(*a, **k)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.pool.shutdown()
+
+
+def test_quasi_set_on_a_process_pool_is_the_serial_one(e12, monkeypatch):
+    """The search runs on the engine: with an executor, the same boxes in the same order,
+    the same control sequences and arrival steps, statuses and counts as serially; and
+    work really went to the workers."""
+    from casadi_cmpc.solvers import _parallel
+
+    monkeypatch.setattr(_parallel, "SUBTREE_MIN_S", 0.0)
+    a = quasi_controllable_set(e12.model, e12.terminal, steps=2, eps=0.05, progress=False)
+    with _CountingPool(2) as pool:
+        b = quasi_controllable_set(e12.model, e12.terminal, steps=2, eps=0.05,
+                                   progress=False, executor=pool)
+        assert pool.tasks > 0
+    for v in ("inner", "boundary", "outside"):
+        assert np.array_equal(getattr(a.paving, v), getattr(b.paving, v))
+    assert np.array_equal(a.controls, b.controls, equal_nan=True)
+    assert np.array_equal(a.arrival, b.arrival) and a.arrival.shape[0] == a.n_inner > 0
+    assert (a.status, a.nit, a.n_boxes, a.history) == (b.status, b.nit, b.n_boxes, b.history)
+    assert sum(h["boxes"] for h in a.history) == a.n_boxes
+    _check_inner_by_simulation(e12.model, b, np.random.default_rng(7), per_box=1, n_w=2)
+
+
+def test_quasi_several_inputs_on_workers_warns_and_stays_sound():
+    """With two inputs the LP may break ties differently per batch: a warning, and every
+    inner box still proven (checked by simulation)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    model = _three_state()
+    T = cm.Polytope.from_box(cm.Box([-0.5] * 3, [0.5] * 3))
+    with ProcessPoolExecutor(2) as pool, pytest.warns(cm.CmpcWarning, match="several inputs"):
+        res = quasi_controllable_set(model, T, steps=2, eps=0.25, executor=pool,
+                                     progress=False)
+    _check_inner_by_simulation(model, res, np.random.default_rng(4), per_box=2, n_w=2)
+
+
+def test_quasi_status_says_what_was_proven(e12):
+    """A completed search that proves no box is not PROVED: UNDECIDED while boxes are
+    undecided (eps too coarse to bisect), DISPROVED when every box is outside."""
+    res = quasi_controllable_set(e12.model, e12.terminal, steps=1, eps=100.0, progress=False)
+    assert res.n_inner == 0 and res.paving.n_boundary == 1
+    assert res.status == cm.Status.UNDECIDED and not res.success
+    far = cm.Polytope.from_box(cm.Box([50.0, 50.0], [51.0, 51.0]))
+    X = cm.Box([-0.1, -0.1], [0.1, 0.1])
+    res = quasi_controllable_set(e12.model, far, steps=1, eps=0.05, X=X, progress=False)
+    assert res.n_inner == 0 and res.paving.n_boundary == 0
+    assert res.status == cm.Status.DISPROVED
