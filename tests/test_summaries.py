@@ -361,3 +361,64 @@ def test_proven_steps_of_a_set_sequence_controller(scalar_seq):
     assert s["proven_steps"] == 6 and s["not_proven"] == {}
     g = cm.simulate(model, np.array([[-1.0]]), [0.9], 3, progress=False).summary()
     assert g["proven_steps"] == 0 and g["not_proven"] == {"none": 3}
+
+
+# ------------------------------------------------------- proofs about other disturbances
+def test_steps_proven_for_the_nominal_w_only_do_not_count_when_another_w_is_applied(
+        disturbed_seq, tmp_path):
+    """A nominal controller proves its steps for the centre of W: run with the vertices of
+    W none of them counts as proven (they count as proven for another w), run with the
+    centre all do; a robust controller's steps count for every w of W. The guarantee of
+    the controller travels with the run and with its file."""
+    model, robust_seq = disturbed_seq
+    nominal_seq = cm.controllable_sets(model, T_SCALAR, 0.1, law=LAW, progress=False)
+    nominal = cm.SetSequenceMPC(model, nominal_seq, local_law=LAW)
+    assert np.array_equal(nominal.proof_w, [[0.0, 0.0]])
+    x0 = [0.9]
+    off = cm.simulate(model, nominal, x0, 8, disturbance="vertices", progress=False)
+    s = off.summary()
+    assert s["proven_steps"] == 0 and s["proven_for_another_w"] == off.steps > 0
+    assert off.proof_covers_w == (False,) * off.steps
+    assert "for w = [0.0] only" in s["guarantee"]
+    line = [ln for ln in _summary_lines(s) if ln.startswith("proven steps")][0]
+    assert f"{off.steps} steps proven for other disturbances than the w applied" in line
+    on = cm.simulate(model, nominal, x0, 8, disturbance="centre", progress=False).summary()
+    assert on["proven_steps"] == 8 and on["proven_for_another_w"] == 0
+    robust = cm.SetSequenceMPC(model, robust_seq, local_law=LAW, robust=True)
+    assert np.array_equal(robust.proof_w, model.W.as_array())
+    rob = cm.simulate(model, robust, x0, 8, disturbance="vertices", progress=False)
+    assert rob.summary()["proven_steps"] == 8 and rob.proof_covers_w == (True,) * 8
+    for suffix in (".json", ".npz"):
+        back = cm.Trajectory.load(off.save(tmp_path / f"run{suffix}"))
+        assert back.proof_covers_w == off.proof_covers_w and back.guarantee == off.guarantee
+        assert back.summary()["proven_for_another_w"] == off.steps
+
+
+def test_an_unproven_local_law_step_does_not_claim_the_robust_property(disturbed_seq):
+    """A robust controller on a sequence whose T is proven for the nominal w only: in T
+    its local-law step is not proven, and its claim says so instead of stating it."""
+    model, _ = disturbed_seq
+    nominal_seq = cm.controllable_sets(model, T_SCALAR, 0.1, law=LAW, progress=False)
+    ctrl = cm.SetSequenceMPC(model, nominal_seq, local_law=LAW, robust=True)
+    res = ctrl.solve([0.1])
+    c = res.certificate
+    assert c.label == "local_law" and c.proved is None
+    assert "is NOT proven" in c.claim and "for all w in W" in c.claim
+
+
+def test_one_step_control_refuses_anything_but_one_state():
+    from casadi_cmpc.exceptions import DimensionError
+
+    model = scalar_model()
+    K = cm.one_step_set(model, T_SCALAR, 0.1, progress=False)
+    assert K.control([0.1]) is not None and K.control([5.0]) is None
+    for bad in (np.zeros((3, 1)), [0.1, 0.2]):
+        with pytest.raises(DimensionError, match="one state of shape"):
+            K.control(bad)
+
+
+def test_certifying_for_a_w_outside_the_models_w_warns(disturbed_seq):
+    model, _ = disturbed_seq
+    with pytest.warns(cm.CmpcWarning, match="not inside the model's W"):
+        cert = cm.certify_invariant(model, T_SCALAR, LAW, 0.05, W=cm.Box([0.5], [0.6]))
+    assert "0.5" in cert.claim

@@ -238,8 +238,10 @@ def export_c(ctrl: Any, directory: Any, solver: str = "sqp", *, overwrite: bool 
     vertex of W with ``cmpc_model_iv``, an interval evaluation generated from the CasADi
     instruction list of the model: the natural inclusion at the point, outward rounded as
     the Python backend rounds (each bound of a ``+ - * /`` or ``sqrt`` moved outward by
-    ``|v| 2**-52 + 2**-1074``, at least one ulp in every rounding mode; ``2**-44`` relative
-    for libm functions; ``[-inf, inf]`` where f may be undefined). For a model affine in w,
+    ``|v| 2**-52 + 2**-1074``, at least one ulp; ``2**-44`` relative for libm functions;
+    ``[-inf, inf]`` where f may be undefined; ``cmpc_step`` runs in the default
+    floating-point environment and gives the caller's back, so a directed rounding mode or
+    flush-to-zero set by the application does not change its answers). For a model affine in w,
     ``f(x, u, W)`` is the convex hull of the vertex images, so it lies in ``K_{i-1}`` when
     every vertex box lies in one convex polytope of the sequence (each row ``a.y <= b``
     tested with an upper bound of ``a.y`` over the box, products and sums rounded upward)

@@ -467,9 +467,14 @@ class OneStepSet(SetResult):
     def control(self, x: Any) -> np.ndarray | None:
         """The stored proving control of the first inner box (or piece) containing ``x``
         (n,), or None when ``x`` lies in none or the method stores no control."""
+        n = self.paving.dim
+        arr = np.asarray(x, dtype=float)
+        if arr.shape not in ((n,), (1, n)) and not (n == 1 and arr.size == 1):
+            raise DimensionError(f"x must be one state of shape ({n},); got shape "
+                                 f"{arr.shape} (for many points use contains(points))")
         if self.witness is None:
             return None
-        x = np.asarray(x, dtype=float).reshape(-1)
+        x = arr.reshape(-1)
         if self.pieces is not None:
             k = int(self._first_piece(x[None])[0])
             return None if k < 0 else self.witness[k].copy()

@@ -24,7 +24,7 @@ from .._bisect import bisect_widest
 from .._interrupt import InterruptScope
 from .._validate import float_vector as _vector
 from .._validate import weight_matrix as _weight
-from ..exceptions import DimensionError, ModelError, UnsupportedOperationError
+from ..exceptions import CmpcWarning, DimensionError, ModelError, UnsupportedOperationError
 from ..model import Model
 from ..sets.box import Box
 from ..sets.polytope import Polytope
@@ -350,6 +350,11 @@ def certify_invariant(model: Model, S: Any, law: Any, eps: float, *, W: Any = No
     if not isinstance(model, Model):
         raise TypeError(f"model must be a casadi_cmpc.Model; got {type(model).__name__}")
     _check_target(S, model.n)
+    if W is not None and model.l and isinstance(W, Box) and W.dim == model.l and not (
+            np.all(model.W.lo <= W.lo) and np.all(W.hi <= model.W.hi)):
+        warnings.warn(f"W = {_box_text(W)} is not inside the model's W = "
+                      f"{_box_text(model.W)}: the certificate is about the W given",
+                      CmpcWarning, stacklevel=2)
     return _certify(model, _closed(model, law), S, eps, W, max_boxes, time_limit, samples,
                     seed, progress, law=law, executor=executor)
 

@@ -16,7 +16,10 @@ Rounding rules (those of :mod:`casadi_cmpc.interval.arith`):
   operations, no moves through the integer registers). A product by a constant of the
   instruction list takes two products instead of four (``civ_mulc``). A lower bound that
   overflowed to +inf becomes the largest float first (an upper bound -inf the most
-  negative one).
+  negative one). An overflow must round to an infinity, as it does in the default
+  floating-point environment: every entry point that evaluates these rules (a batch
+  kernel, an exported controller's step) sets that environment (round to nearest,
+  subnormals kept) and gives the caller's back (``CIV_ENV_ENTER``/``CIV_ENV_LEAVE``).
 * libm functions (exp, log, sin, ...): a margin of ``2**-44`` relative (256 ulps) plus
   ``2**-1060`` absolute, then one ulp; results are intersected with the range of the
   function. ``exp``, ``sin`` and ``cos`` are computed here, without libm, in straight-line
@@ -231,6 +234,22 @@ PRELUDE = r"""
 #endif
 
 typedef struct { double lo, hi; } civ;
+
+/* The rules are proven for the default floating-point environment: round to nearest,
+ * subnormals kept (no flush-to-zero, no denormals-are-zero). In a directed rounding mode
+ * an overflow gives the largest float instead of an infinity, and with flush-to-zero a
+ * subnormal bound becomes 0: a bound could then miss the exact value. So every entry point
+ * that evaluates them (a batch kernel, an exported controller's step) sets the default
+ * environment (exceptions masked) and gives the caller's back on return. */
+#if defined(__SSE2__) || defined(__x86_64__)
+#include <xmmintrin.h>
+#define CIV_ENV_ENTER unsigned int civ_csr_ = _mm_getcsr(); _mm_setcsr(0x1F80u)
+#define CIV_ENV_LEAVE _mm_setcsr(civ_csr_)
+#else
+#include <fenv.h>
+#define CIV_ENV_ENTER fenv_t civ_env_; feholdexcept(&civ_env_); fesetenv(FE_DFL_ENV)
+#define CIV_ENV_LEAVE fesetenv(&civ_env_)
+#endif
 
 /* every rule inlined where it is used (a compiler then runs a batch loop in SIMD lanes) */
 #ifndef CIV_INLINE

@@ -236,19 +236,8 @@ CIV_INLINE civ civ_out(civ a) {
 #define CIV_PUT(Q, k, v) do { civ t_ = civ_out(v); Q[k][l] = t_.lo; Q[(k) + 1][l] = t_.hi; } \
     while (0)
 
-/* The kernel runs in the default floating-point environment (round to nearest, subnormals
- * kept: no flush-to-zero, no denormals-are-zero, exceptions masked), whatever the caller's,
- * and restores the caller's on return. The rules hold in every rounding mode; a library
- * that set flush-to-zero would break the rounding of tiny bounds. */
-#if defined(__SSE2__) || defined(__x86_64__)
-#include <xmmintrin.h>
-#define CIV_ENV_ENTER unsigned int civ_csr_ = _mm_getcsr(); _mm_setcsr(0x1F80u)
-#define CIV_ENV_LEAVE _mm_setcsr(civ_csr_)
-#else
-#include <fenv.h>
-#define CIV_ENV_ENTER fenv_t civ_env_; feholdexcept(&civ_env_); fesetenv(FE_DFL_ENV)
-#define CIV_ENV_LEAVE fesetenv(&civ_env_)
-#endif
+/* The kernel sets the default floating-point environment (CIV_ENV_ENTER of the prelude)
+ * and gives the caller's back on return. */
 #define CMPC_L 16 /* boxes per block: whole SIMD registers of 2, 4 or 8 doubles */
 """
 

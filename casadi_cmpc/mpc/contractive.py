@@ -1490,6 +1490,13 @@ class ContractiveMPC:
         return export_c(self, directory, solver=solver, **kw)
 
     @property
+    def proof_w(self) -> np.ndarray:
+        """The disturbances its verified plans are proven for, as a box (l, 2): the thin
+        box at ``w_nominal``."""
+        w = np.asarray(self.w_nominal, dtype=float).reshape(self.model.l)
+        return np.stack([w, w], axis=-1)
+
+    @property
     def guarantee(self) -> str:
         """What the closed loop under this controller is guaranteed (one sentence)."""
         w = (f" for w = {np.asarray(self.w_nominal).tolist()} (the nominal disturbance) only"

@@ -399,6 +399,12 @@ class QuasiMultiStepMPC:
         return export_c(self, directory, solver=solver, **kw)
 
     @property
+    def proof_w(self) -> np.ndarray:
+        """The disturbances its proven steps hold for, as a box (l, 2): the W of its
+        sets."""
+        return np.array(self._W[0], dtype=float).reshape(self.model.l, 2)
+
+    @property
     def guarantee(self) -> str:
         """What the closed loop is guaranteed (one sentence)."""
         return ("from x in P_j every applied sequence is proven (zonotope evolution, "

@@ -773,6 +773,12 @@ class SetSequenceMPC:
                 f"K_(i-1), so T = K_0 is reached in at most i steps{w}; {law}. A step that "
                 "is not certified (e.g. x outside every K_i) says so in its label")
 
+    @property
+    def proof_w(self) -> np.ndarray:
+        """The disturbances its certified steps are proven for, as a box (l, 2): W when
+        robust, else the thin box at the nominal w (the centre of W)."""
+        return np.array(self._Wbox, dtype=float).reshape(self.model.l, 2)
+
     def _w_claim(self) -> str:
         """Which disturbances a claim of this controller covers (built once)."""
         text = self._w_text
@@ -823,7 +829,10 @@ class SetSequenceMPC:
             u = np.asarray(self._law(x), dtype=float).reshape(m)
             cert = Certificate(
                 "local_law", True if self._law_proved else None,
-                "x in T: the local law keeps the state in T" + self._w_claim(),
+                "x in T: the local law keeps the state in T" + self._w_claim()
+                if self._law_proved else
+                "x in T: the local law is applied (that it keeps the state in T"
+                + self._w_claim() + " is NOT proven)",
                 f"T is proven invariant under this law ({self.seq.info.get('terminal_claim')})"
                 if self._law_proved else
                 "the invariance of T under this law was not proven "

@@ -33,9 +33,9 @@ from ..model import Model
 __all__ = ["simulate", "Trajectory"]
 
 _FORMAT = "casadi_cmpc.Trajectory"
-_FORMAT_VERSION = 2  # 2: per-step levels of set-sequence controllers
+_FORMAT_VERSION = 3  # 2: per-step levels of set-sequence controllers; 3: proof_covers_w
 _STOP_REASONS = ("steps", "stop_when", "interrupted", "diverged", "not_controllable")
-_LIST_FIELDS = ("status", "certificate", "horizon", "mode", "level")
+_LIST_FIELDS = ("status", "certificate", "horizon", "mode", "level", "proof_covers_w")
 # the kind of a step, from the mode the controller reported
 _SOLVER_MODES = frozenset({"mpc"})
 _LAW_MODES = frozenset({"local_law"})
@@ -81,6 +81,15 @@ class Trajectory:
         the index of the set ``K_i`` that held ``x(k)`` (``last_info["level"]``, or the
         ``"horizon"`` a :class:`~casadi_cmpc.SetSequenceMPC` reports); None for other
         controllers. Given empty, it is None at every step.
+    proof_covers_w : tuple of (bool or None), length K
+        Whether the disturbances the controller's proofs are about (its ``proof_w`` box: W
+        for a robust controller, the nominal w for a nominal one) hold the w applied at
+        step k; None where the controller names none (or the model has no w). A step
+        proven for the nominal w only and run with another w does not count as proven
+        (see :meth:`summary`). Given empty, it is None at every step.
+    guarantee : str
+        The controller's ``guarantee`` (what its closed loop is proven to do, for which
+        disturbances); empty when it states none.
     violations : mapping
         ``"state"``: number of states ``x(k)``, ``k >= 1``, outside the model's X;
         ``"input"``: number of inputs ``u(k)`` outside U; ``"state_steps"``,
@@ -134,6 +143,8 @@ class Trajectory:
     seed: int | None = None
     model_name: str = ""
     level: tuple = ()
+    proof_covers_w: tuple = ()
+    guarantee: str = ""
 
     def __post_init__(self) -> None:
         x = np.array(self.x, dtype=float)
@@ -158,6 +169,8 @@ class Trajectory:
             seq = tuple(getattr(self, name))
             if name == "level":
                 seq = tuple(None if v is None else int(v) for v in seq) or (None,) * K
+            elif name == "proof_covers_w":
+                seq = tuple(None if v is None else bool(v) for v in seq) or (None,) * K
             if len(seq) != K:
                 raise DimensionError(f"{name} must have one entry per step ({K}); got {len(seq)}")
             values[name] = seq
@@ -231,10 +244,14 @@ class Trajectory:
         ``disturbance``, ``seed``, ``x0``, ``final_state``, ``final_norm_inf`` (max-norm of
         ``x(K)``), ``violations`` (counts and step indices), ``certificates``, ``statuses``,
         ``modes`` (counts per value, ``"none"`` for None), ``proven_steps`` (steps whose
-        certificate's claim holds: status PROVED, or ``"ok"`` with a certificate, as the
-        set-sequence controllers report it), ``not_proven`` (the other steps, counted by
+        certificate's claim holds for the w applied: status PROVED, or ``"ok"`` with a
+        certificate, as the set-sequence controllers report it, and a w inside the
+        disturbances the proof is about), ``proven_for_another_w`` (steps proven for the
+        controller's disturbances only, e.g. the nominal w, while another w was applied:
+        not counted as proven), ``not_proven`` (the steps without a proof, counted by
         certificate label, ``"none"`` for a step without one: e.g. a local-law step in a
         set whose invariance is not proven keeps the label ``"local_law"`` and counts here),
+        ``guarantee`` (the controller's, None when it states none),
         ``step_kinds`` (steps per
         :attr:`step_kind`: ``"solver"``, ``"local_law"``, ``"other"``; they add up to
         ``steps``), ``horizons`` (histogram of the prediction horizons, keys as strings,
@@ -259,8 +276,12 @@ class Trajectory:
         # a proven step: status PROVED (contractive MPC), or "ok" with a certificate (the
         # set-sequence controllers report a proven step as "ok", the others by the name of
         # their status); "ok" without a certificate is a controller that reports none
-        proven = [st == "PROVED" or (st == "ok" and c is not None)
-                  for st, c in zip(self.status, self.certificate, strict=True)]
+        claimed = [st == "PROVED" or (st == "ok" and c is not None)
+                   for st, c in zip(self.status, self.certificate, strict=True)]
+        # a proof about other disturbances than the one applied does not prove the step
+        other_w = [ok and cov is False for ok, cov in zip(claimed, self.proof_covers_w,
+                                                           strict=True)]
+        proven = [ok and not o for ok, o in zip(claimed, other_w, strict=True)]
         solver = np.array([k == "solver" for k in kinds], dtype=bool)
         solve_time = _time_stats(self.solve_time[solver])
         solve_time["steps"] = int(solver.sum())
@@ -283,8 +304,10 @@ class Trajectory:
             "certificates": counts(self.certificate),
             "statuses": counts(self.status),
             "proven_steps": sum(proven),
-            "not_proven": counts(tuple(c for c, ok in zip(self.certificate, proven,
+            "proven_for_another_w": sum(other_w),
+            "not_proven": counts(tuple(c for c, ok in zip(self.certificate, claimed,
                                                           strict=True) if not ok)),
+            "guarantee": self.guarantee or None,
             "modes": counts(self.mode),
             "step_kinds": {k: kinds.count(k) for k in _STEP_KINDS},
             "horizons": histogram([h for h, lv in zip(self.horizon, self.level, strict=True)
@@ -306,7 +329,8 @@ class Trajectory:
             "disturbance": self.disturbance, "seed": self.seed,
             "status": list(self.status), "certificate": list(self.certificate),
             "horizon": list(self.horizon), "mode": list(self.mode),
-            "level": list(self.level),
+            "level": list(self.level), "proof_covers_w": list(self.proof_covers_w),
+            "guarantee": self.guarantee,
             "violations": {k: (list(v) if isinstance(v, tuple) else v)
                            for k, v in self.violations.items()},
         }
@@ -366,6 +390,8 @@ class Trajectory:
         return cls(**arrays, status=tuple(data["status"]),
                    certificate=tuple(data["certificate"]), horizon=tuple(data["horizon"]),
                    mode=tuple(data["mode"]), level=tuple(data.get("level", ())),
+                   proof_covers_w=tuple(data.get("proof_covers_w", ())),
+                   guarantee=str(data.get("guarantee", "")),
                    violations=data["violations"], model=model,
                    stop_reason=data["stop_reason"], disturbance=data["disturbance"],
                    seed=data["seed"], model_name=data["model_name"])
@@ -443,7 +469,10 @@ def _summary_lines(s: Mapping[str, Any]) -> list[str]:
             f"N = {k}: {plural(c, 'step')}" for k, c in horizons.items()))
     if "proven_steps" in s and total:  # what the certificates of the steps proved
         unproven = s.get("not_proven") or {}
+        other = int(s.get("proven_for_another_w") or 0)
         lines.append(f"proven steps: {int(s['proven_steps'])} of {total}" + (
+            f"; {plural(other, 'step')} proven for other disturbances than the w applied "
+            "(not counted)" if other else "") + (
             "; not proven: " + ", ".join(f"{'no certificate' if k == 'none' else k}: {c}"
                                          for k, c in unproven.items()) if unproven else ""))
     return lines
@@ -492,6 +521,12 @@ class _Controller:
         from .sequence import SetSequenceMPC
 
         self.levels = isinstance(ctrl, SetSequenceMPC)
+        # the disturbances the controller's proofs are about (l, 2), and what it guarantees
+        scope = getattr(ctrl, "proof_w", None) if model.l else None
+        self.w_scope = None if scope is None else np.asarray(scope, dtype=float).reshape(
+            model.l, 2)
+        text = getattr(ctrl, "guarantee", None)
+        self.guarantee = text if isinstance(text, str) else ""
         if ctrl is None:
             if m > 0:
                 raise TypeError(f"ctrl is None but model '{model.name}' has m = {m} input(s); "
@@ -523,6 +558,13 @@ class _Controller:
                 raise ValueError("the gain K contains NaN or infinite entries")
             K = K.copy()
             self.fun = lambda x: K @ x
+
+    def covers(self, w: np.ndarray) -> bool | None:
+        """Whether the w applied lies in the disturbances the proofs are about (None: the
+        controller names none)."""
+        if self.w_scope is None:
+            return None
+        return bool(np.all((self.w_scope[:, 0] <= w) & (w <= self.w_scope[:, 1])))
 
     def info(self) -> Mapping[str, Any] | None:
         """The controller's ``last_info`` dict after a call, or None."""
@@ -752,6 +794,7 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
     horizon: list[Any] = []
     mode: list[Any] = []
     level: list[Any] = []
+    covers: list[Any] = []
     solve_time: list[float] = []
     call_time: list[float] = []
     done = 0
@@ -802,6 +845,7 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
             for lst, v in zip((status, certificate, horizon, mode, solve_time, level),
                               rec, strict=True):
                 lst.append(v)
+            covers.append(controller.covers(w))
             call_time.append(elapsed)
             done = k + 1
             if not bar.disable:
@@ -826,7 +870,8 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
         mode=tuple(mode), violations=_count_violations(model, x_arr, u_arr), model=model,
         stop_reason=reason, disturbance=label,
         seed=int(seed) if isinstance(seed, (int, np.integer)) else None,
-        model_name=model.name, level=tuple(level))
+        model_name=model.name, level=tuple(level), proof_covers_w=tuple(covers),
+        guarantee=controller.guarantee)
 
 
 def _record(info: Mapping[str, Any] | None, mode: str, elapsed: float, levels: bool = False

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import shutil
+import sys
 from fractions import Fraction
 from typing import Any
 
@@ -377,3 +378,29 @@ def test_polytope_membership_agrees_with_rational_arithmetic():
             for z in (y, [y[0] + hair * (1 if A[r, 0] > 0 else -1)] + y[1:],
                       [y[0] - hair * (1 if A[r, 0] > 0 else -1)] + y[1:]):
                 assert in_polytope(A, b, z) == in_polytope_exact(A, b, z)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fesetround through glibc")
+def test_exported_step_answers_alike_in_every_rounding_mode(tmp_path):
+    """cmpc_step sets the default floating-point environment for its interval checks (an
+    overflow must round to inf there) and gives the caller's back: an application running
+    in a directed rounding mode gets the controls and codes of the default mode."""
+    import ctypes
+
+    libm = ctypes.CDLL("libm.so.6")
+    model, law = cancelling_model(1e14)
+    seq, ctrl, C = exported(model, law, tmp_path / "c", robust=True, polytopic=True,
+                            eps=0.1, steps=4)
+    states = states_of(seq, np.random.default_rng(3), 60)
+    ref = [C.step(x) for x in states]
+    for mode in (0x400, 0x800, 0xC00):  # downward, upward, toward zero
+        C.reset()
+        libm.fesetround(mode)
+        try:
+            got = [C.step(x) for x in states]
+            kept = libm.fegetround()
+        finally:
+            libm.fesetround(0)
+        assert kept == mode  # the caller's mode given back
+        assert all(np.array_equal(u, v, equal_nan=True) and a == b
+                   for (u, a), (v, b) in zip(got, ref, strict=True))
