@@ -874,11 +874,11 @@ def _modal(model: Model, target: Any, eps: float, D: Box, robust: bool, relative
 
 def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
                     assume_invariant: bool, robust: bool, eps: float, X: Box,
-                    executor: Any = None) -> Any:
+                    executor: Any = None, prove: bool = True) -> Any:
     """The certificate of T's invariance (certified on ``executor`` when given), or a clear
-    error."""
+    error. ``prove=False``: the checks only (None where T is to be certified under
+    ``law``: :func:`_prove_terminal` does it)."""
     from ..solvers.result import Certificate
-    from .invariance import certify_invariant
 
     n = model.n
     D = np.vstack([np.eye(n), -np.eye(n)])
@@ -912,18 +912,55 @@ def _check_terminal(model: Model, T: Any, law: Any, certificate: Any,
             "without a proof")
     if not isinstance(T, Polytope):
         raise ValueError("certifying T with law= needs T as a Polytope")
-    W = W_need
+    if not prove:
+        return None
+    return _proven_or_raise(_prove_terminal(model, T, law, W_need, executor))
+
+
+def _prove_terminal(model: Model, T: Polytope, law: Any, W: Box | None,
+                    executor: Any = None) -> Any:
+    """certify_invariant of T under ``law`` for W at finer pieces (relative to T) while
+    undecided: its certificate, proven or not."""
+    from .invariance import certify_invariant
+
     size = float(np.max(T.bounding_box().diam))
-    for e in (0.02, 0.005, 0.0015, 0.0005):  # finer pieces (relative to T) while undecided
+    for e in (0.02, 0.005, 0.0015, 0.0005):
         cert = certify_invariant(model, T, law, eps=e * size, W=W, time_limit=60,
                                  executor=executor)
         if cert.proved is not None:
             break
+    return cert
+
+
+def _prove_terminal_task(blob: bytes) -> Any:
+    """Worker side of :func:`_prove_terminal` (model, T, law and W pickled together, so
+    that the law's symbols are the model's)."""
+    import pickle
+
+    with ca.global_unpickle_context():
+        model, T, law, W = pickle.loads(blob)
+    return _prove_terminal(model, T, law, W)
+
+
+def _proven_or_raise(cert: Any) -> Any:
     if cert.proved is not True:
         raise ValueError(f"the terminal set is not proven invariant under the law "
                          f"({cert.label}: {cert.reason}); pass assume_invariant=True to "
                          "proceed without a proof")
     return cert
+
+
+def _terminal_beside(model: Model, T: Polytope, law: Any, robust: bool, executor: Any
+                     ) -> Any:
+    """T's proof submitted to ``executor`` as one task, to run beside the first steps (a
+    future), or None when it cannot be sent (the caller proves T here)."""
+    from ..solvers._parallel import _dumps
+
+    try:
+        blob = _dumps((model, T, law, _terminal_W(model, robust)))
+        return executor.submit(_prove_terminal_task, blob)
+    except Exception:  # noqa: BLE001 - not picklable, or a pool that takes no task
+        return None
 
 
 def _terminal_W(model: Model, robust: bool) -> Box | None:
@@ -1145,20 +1182,45 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                       max_cells=max_cells, w_points=wpts)
     saved = None if ck is None else ck.load(key)
     tinfo = _stored_terminal(model, saved, law, certificate, assume_invariant, robust)
+    proof = None  # T's proof running beside the first steps (a future)
     if tinfo is None:
         cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D,
-                               executor)
-        tinfo = {"terminal_certificate": cert.label, **_terminal_info(model, cert)}
-    key.append(terminal_part(tinfo))
+                               executor, prove=executor is None or ck is not None)
+        if cert is None:
+            proof = _terminal_beside(model, T, law, robust, executor)
+            if proof is None:
+                cert = _proven_or_raise(_prove_terminal(model, T, law,
+                                                        _terminal_W(model, robust), executor))
+        if cert is not None:
+            tinfo = {"terminal_certificate": cert.label, **_terminal_info(model, cert)}
+    if tinfo is not None:
+        key.append(terminal_part(tinfo))
     done: list[dict[str, Any]] = []  # steps completed in the checkpoint (replayed)
     if saved is not None:
         ck.check(saved, key)
         done, saved_frontier = ck.resume_state(saved, model.n)
-    seq = SetSequence(sets=[T], info={
-        "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
-        "about": about_model(model, robust),
-        "polytopic": bool(polytopic), "terminal_certificate": tinfo["terminal_certificate"],
-        "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo})
+
+    def info_of(tinfo: dict[str, Any]) -> dict[str, Any]:
+        return {"model": model.name, "eps": eps, "robust": bool(robust),
+                "semantics": semantics, "about": about_model(model, robust),
+                "polytopic": bool(polytopic),
+                "terminal_certificate": tinfo["terminal_certificate"],
+                "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo}
+
+    def terminal_proven() -> dict[str, Any]:
+        """The info of T's proof run beside the steps (waiting for it; its worker died:
+        here), or the error of a proof that failed."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            cert = proof.result()
+        except BrokenProcessPool:
+            cert = _prove_terminal(model, T, law, _terminal_W(model, robust))
+        cert = _proven_or_raise(cert)
+        return {"terminal_certificate": cert.label, **_terminal_info(model, cert)}
+
+    seq = SetSequence(sets=[T], info=info_of(tinfo if tinfo is not None else
+                                             {"terminal_certificate": "pending"}))
     frontier = D.as_array()[None]
     inner = np.zeros((0, model.n, 2))
     compact = inner  # the same union as inner, in fewer boxes: what the searches test
@@ -1171,6 +1233,8 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     scope = InterruptScope()
     try:
         for i in range(1, max_steps + 1):
+            if proof is not None and proof.done():  # a failed proof ends the run now
+                tinfo, proof = terminal_proven(), None
             ts = time.perf_counter()
             searched = i > len(done)
             if not searched:  # completed in the checkpoint: its step, as computed then
@@ -1234,12 +1298,19 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
                 break
             target = K if polytopic else SetUnion(
                 [T, Paving(inner=compact, domain=D)], dim=model.n)
+        if proof is not None:
+            tinfo, proof = terminal_proven(), None
     except KeyboardInterrupt:
         scope.reraise_if_nested()
         seq.status = "interrupted"
     finally:
         scope.close()
         bar.close()
+        if proof is not None:  # interrupted before T's proof ended: T is not proven
+            proof.cancel()
+            seq.info = info_of({"terminal_certificate": "not proven (interrupted)"})
+    if tinfo is not None and seq.info["terminal_certificate"] == "pending":
+        seq.info = info_of(tinfo)
     seq.info["seconds"] = time.perf_counter() - t0
     if ck is not None:
         seq.info["resumed_steps"] = min(len(done), len(seq.steps))

@@ -514,12 +514,13 @@ class InclusionFunction:
     evaluated :attr:`native_after` batches (its compilation starts in the background after
     :attr:`native_prefetch` batches, and the switch waits for it: the batch at which the
     backend changes does not depend on timings); ``"numpy"``, ``"scalar"`` and ``"native"``
-    force one (an empty batch always goes to numpy). Small batches count toward the move only
-    for a function of :attr:`native_large` instructions or more (a compilation pays for
-    itself only after thousands of small calls of a small function); once a function is on
-    its native kernel, a small batch goes there too when it holds at least
-    :attr:`native_small_work` box instructions (boxes × instructions: the scalar code would
-    then take longer than the kernel's call). The centered form's scalar evaluation runs
+    force one (an empty batch always goes to numpy). Small batches count toward the move as
+    one batch each for a function of :attr:`native_large` instructions or more, and as one
+    batch per :attr:`native_small_quantum` box instructions (boxes × instructions) for a
+    smaller one (a compilation pays for itself only after thousands of small calls of a
+    small function); once a function is on its native kernel, a small batch goes there too
+    when it holds at least :attr:`native_small_work` box instructions (the scalar code
+    would then take longer than the kernel's call). The centered form's scalar evaluation runs
     its Jacobian graph on floats and combines the mean-value terms in Python exactly as
     :meth:`_centered_impl` does (its jump guard encloses the guard expressions with scalar code
     too). A Function with an operation the scalar evaluator lacks is evaluated with numpy
@@ -535,6 +536,7 @@ class InclusionFunction:
     native_prefetch: int = 4
     native_large: int = 200
     native_small_work: int = 64
+    native_small_quantum: int = 65536
 
     def __init__(self, fun: ca.Function | _dv.ParamFunction, kind: str = "natural", *,
                  backend: str = "auto", derived_outputs: Sequence[int] = (),
@@ -599,6 +601,7 @@ class InclusionFunction:
         self._is_natural = self._natural_form()
         self._native: Any = None  # the native kernel; False: not available
         self._native_batches = 0  # batches evaluated so far by numpy (auto: when to compile)
+        self._small_work = 0  # box instructions of small batches not yet counted
         self._n_instr = self.fun.n_instructions() + (
             self._g.n_instructions() if not self._is_natural else 0)
         self._large = self._n_instr >= self.native_large  # small batches count toward native
@@ -1179,8 +1182,23 @@ class InclusionFunction:
             # to the native kernel: a large function after native_after batches (counted
             # here too); another once it has moved there and the work is worth the kernel's
             # call (about 8 µs; the scalar evaluator: about 0.1 µs per box and instruction)
-            go = self._wants_native(n) if self._large else (
-                n * self._n_instr >= self.native_small_work and self._native_ready())
+            work = n * self._n_instr
+            if self._large:
+                go = self._wants_native(n)
+            elif work < self.native_small_work:
+                go = False
+            elif self._native_ready():
+                go = True
+            else:
+                # small batches of a smaller function count toward the move by their work:
+                # one batch per native_small_quantum box instructions (the scalar code
+                # spends 0.1-0.5 µs on each), so that the move comes once the scalar
+                # evaluations have cost about what the kernel's compilation does (0.1-1 s)
+                self._small_work += work
+                go = False
+                if self._small_work >= self.native_small_quantum:
+                    self._small_work -= self.native_small_quantum
+                    go = self._wants_native(n)
         else:
             go = bool(n) and self._wants_native(n)
         if go:

@@ -510,3 +510,36 @@ def test_rows_are_checked():
     for bad in ([-1], [4], [0, 10**6]):  # rows the kernels would read out of bounds
         with pytest.raises(IndexError, match="row indices"):
             Rows(a, a, 0, 3, np.array(bad))
+
+
+def test_small_batches_of_a_medium_function_move_it_to_native_by_their_work():
+    """A function below native_large instructions called only with small batches (a
+    nested search's small levels, a controller's checks) moves to its native kernel once
+    those batches add up to native_after quanta of work (boxes x instructions): about what
+    a compilation costs; the answers stay sound and the move comes at a fixed call."""
+    from casadi_cmpc.interval._native import native_available
+
+    if not native_available():
+        pytest.skip("no C compiler")
+    x = ca.SX.sym("x", 3)
+    e = x
+    for _ in range(2):
+        e = ca.vertcat(e[0] + 0.1 * e[1] * e[2], e[1] - 0.1 * ca.sin(e[0]), 0.9 * e[2] + e[0] ** 2)
+    fun = ca.Function("medium", [x], [e])
+    F = InclusionFunction(fun, "centered")
+    assert not F._large and F._n_instr * 16 >= F.native_small_work
+    rng = np.random.default_rng(2)
+    c = rng.random((16, 3))
+    boxes = np.stack([c, c + 1e-3], -1)
+    per_call = 16 * F._n_instr
+    calls = -(-F.native_small_quantum * (F.native_after + 1) // per_call)
+    for k in range(calls + 1):
+        got = F.evaluate_unchecked([boxes], 16)[0]
+        if k == 0:
+            first = got
+        if k == calls // 2:
+            assert not F._native_ready()  # not before the work adds up
+    assert F._native_ready() and F._native not in (None, False)  # moved, small batches alone
+    assert np.all(got[..., 0] <= first[..., 1]) and np.all(first[..., 0] <= got[..., 1])
+    ref = InclusionFunction(fun, "centered", backend="numpy")(boxes)[0]
+    assert np.all(got[..., 0] <= ref[..., 1]) and np.all(ref[..., 0] <= got[..., 1])

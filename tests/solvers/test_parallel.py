@@ -32,12 +32,15 @@ class _Counting(Executor):
     """An executor that counts the tasks it passes on (the levels did go to the pool)."""
 
     def __init__(self, inner: Executor) -> None:
-        self.inner, self.n, self.parts = inner, 0, 0
+        self.inner, self.n, self.parts, self.proofs = inner, 0, 0, 0
         self._max_workers = 2
 
     def submit(self, fn, /, *args, **kwargs):
+        from casadi_cmpc.control.controllable import _prove_terminal_task
+
         self.n += 1
         self.parts += fn is _parallel._subtree  # a part of a search cut at its split level
+        self.proofs += fn is _prove_terminal_task  # T's proof beside the first steps
         return self.inner.submit(fn, *args, **kwargs)
 
 
@@ -226,16 +229,19 @@ def test_e9_robust_sequence_is_the_same_serial_on_a_pool_and_on_dask(pool, monke
     def run(executor=None):
         seq = cm.controllable_sets(ex.model, ex.terminal, 0.025, robust=True,
                                    law=ex.local_law, progress=False, executor=executor)
-        return [s["boxes"] for s in seq.steps], [s["witness"] for s in seq.steps]
+        info = {k: v for k, v in seq.info.items() if k != "seconds"}
+        return [s["boxes"] for s in seq.steps], [s["witness"] for s in seq.steps], info
 
     ref = run()
     runs = [run(pool)]
+    assert pool.proofs == 1  # T was proven by a worker while the first steps ran
+    assert repr(runs[0][2]) == repr(ref[2]) and ref[2]["terminal_certificate"] == "proved"
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         runs.append(run(client.get_executor()))
-    for boxes, wit in runs:
+    for boxes, wit, _ in runs:
         assert len(boxes) == len(ref[0]) > 10
         assert all(np.array_equal(a, b) for a, b in zip(boxes, ref[0], strict=True))
         assert all(np.array_equal(a, b, equal_nan=True)
@@ -377,3 +383,17 @@ def test_a_worker_dying_in_its_part_loses_no_box(always_cut):
         got = branch_and_bound(fr, _DiesInPart(), 0.02, progress=False, executor=ex)
     assert any("worker process died" in str(r.message) for r in rec)
     _same_outcome(ref, got)
+
+
+def test_a_terminal_set_whose_proof_fails_on_a_worker_fails_the_run(process_pool):
+    """T's proof runs beside the first steps on the executor; when it does not prove T,
+    the run raises the serial run's error (and returns no sequence)."""
+    ex = cm.models.load("cannon_robust")
+    big = cm.Polytope(ex.terminal.A, 3.0 * ex.terminal.b)  # not invariant under the law
+    with pytest.raises(ValueError, match="not proven invariant") as serial:
+        cm.controllable_sets(ex.model, big, 0.1, robust=True, law=ex.local_law,
+                             progress=False, max_steps=3)
+    with pytest.raises(ValueError, match="not proven invariant") as pooled:
+        cm.controllable_sets(ex.model, big, 0.1, robust=True, law=ex.local_law,
+                             progress=False, max_steps=3, executor=_Counting(process_pool))
+    assert str(pooled.value) == str(serial.value)
