@@ -63,3 +63,29 @@ def test_bad_worker_options_are_refused(capsys):
         main(["run", "cannon", "--workers", "2", "--scheduler", "tcp://x:1"])
     assert e.value.code == 2 and "not allowed with" in capsys.readouterr().err
 
+
+
+@pytest.mark.parametrize("example, eps", [("khalil_affine_control", "0.1"),
+                                          ("khalil_affine_state", "0.2")])
+def test_structured_pipelines_run_with_workers_and_give_the_serial_sets(example, eps, capsys,
+                                                                        monkeypatch):
+    """E12 (quasi sets on the engine, with its executor) and E11 (the affine-state grid, T's
+    proof on the executor): ``--workers 2`` prints the sets and the run of the serial
+    command; ``--checkpoint`` stays for the general sets."""
+    from casadi_cmpc import cli
+
+    args = ["run", example, "--eps", eps, "--steps", "3", "--no-progress"]
+
+    def sets_and_run(extra):
+        monkeypatch.setattr(cli, "_SETS_OF_THIS_PROCESS", {})  # computed again
+        assert main([*args, *extra]) == 0
+        out = capsys.readouterr().out
+        return [ln for ln in out.splitlines()
+                if ln.startswith(("terminal set:", "  certificates", "  final state"))]
+
+    serial = sets_and_run([])
+    assert serial and any(ln.startswith("terminal set:") for ln in serial)
+    assert sets_and_run(["--workers", "2"]) == serial
+    assert main([*args, "--checkpoint", "x.npz"]) != 0
+    out = capsys.readouterr()
+    assert "--checkpoint is for the general" in out.err + out.out
