@@ -491,7 +491,7 @@ class _BoxGrid:
 
         Q = np.ascontiguousarray(Q, dtype=np.float64)
         out = np.empty(Q.shape[0], dtype=np.int8)
-        if self._addr is None:  # the addresses of the index's arrays (never modified)
+        if getattr(self, "_addr", None) is None:  # the index's arrays (never modified)
             self._addr = ((a(self._edges_cat), a(self._off), a(self.table), a(self._stride)),
                           (a(self._glo), a(self._ginv), a(self._hints), a(self._hoff)))
         fn(Q.shape[0], n, a(Q), *self._addr[0], int(contains), a(out), *self._addr[1])
