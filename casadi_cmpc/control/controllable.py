@@ -1185,9 +1185,10 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     proof = None  # T's proof running beside the first steps (a future)
     if tinfo is None:
         cert = _check_terminal(model, T, law, certificate, assume_invariant, robust, eps, D,
-                               executor, prove=executor is None or ck is not None)
-        if cert is None:
-            proof = _terminal_beside(model, T, law, robust, executor)
+                               prove=False)
+        if cert is None:  # T to be certified under law: beside the steps on the executor
+            if executor is not None and ck is None:  # (a checkpoint's key holds the proof)
+                proof = _terminal_beside(model, T, law, robust, executor)
             if proof is None:
                 cert = _proven_or_raise(_prove_terminal(model, T, law,
                                                         _terminal_W(model, robust), executor))

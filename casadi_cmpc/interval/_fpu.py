@@ -17,33 +17,43 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import functools
 import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 from ..exceptions import CmpcError
 
-__all__ = ["is_default", "call_in_default", "FPUStateError"]
+__all__ = ["is_default", "call_in_default", "default_env", "FPUStateError"]
 
 R = TypeVar("R")
 
-# operands read at run time (a literal expression would be folded by the compiler, in the
-# compiler's environment)
-_ONE, _SMALL, _MIN_NORMAL, _HALF, _SUBNORMAL, _ZERO = (
-    [1.0, 1e-20, 2.2250738585072014e-308, 0.5, 5e-324, 0.0])
+# The check of the environment, as source: generated evaluators inline it with these
+# operands as local defaults (read at run time: a literal expression would be folded by
+# the compiler, in the compiler's environment). 1 +- 1e-20 rounds to 1 in no directed
+# mode; half the smallest normal is a subnormal result (flush-to-zero makes it 0); the
+# smallest subnormal read as an operand (denormals-are-zero makes it 0).
+CHECK_OPERANDS = {"_O": 1.0, "_E": 1e-20, "_T": 2.2250738585072014e-308, "_H": 0.5,
+                  "_S": 5e-324, "_Z": 0.0}
+NOT_DEFAULT = "_O + _E != _O or _O - _E != _O or _T * _H == _Z or _S + _Z == _Z"
+CHECK_PARAMS = ", ".join(f"{k}={v!r}" for k, v in CHECK_OPERANDS.items())
 
 
 class FPUStateError(CmpcError):
     """The floating-point environment is not the default and cannot be switched here."""
 
 
-def is_default() -> bool:
-    """True when this thread computes in the default floating-point environment: round to
-    nearest (``1 +- 1e-20`` rounds to 1 in no directed mode), subnormal results kept (no
-    flush-to-zero) and subnormal operands read (no denormals-are-zero)."""
-    one, small = _ONE, _SMALL
-    return (one + small == one and one - small == one
-            and _MIN_NORMAL * _HALF != _ZERO and _SUBNORMAL + _ZERO != _ZERO)
+def _make_is_default() -> Callable[[], bool]:
+    ns: dict[str, Any] = {}
+    exec(f"def is_default({CHECK_PARAMS}):\n    return not ({NOT_DEFAULT})\n", ns)  # noqa: S102
+    fn = ns["is_default"]
+    fn.__doc__ = ("True when this thread computes in the default floating-point environment:"
+                  " round to nearest, subnormal results kept (no flush-to-zero) and subnormal"
+                  " operands read (no denormals-are-zero).")
+    return fn
+
+
+is_default = _make_is_default()
 
 
 _ENV_BYTES = 512  # larger than the fenv_t of any C library
@@ -67,7 +77,7 @@ def _load() -> tuple[Any, Any, Any]:
     return _libm[0]
 
 
-def call_in_default(fn: Callable[..., R], *args: Any) -> R:
+def call_in_default(fn: Callable[..., R], *args: Any, **kwargs: Any) -> R:
     """``fn(*args)`` in the default floating-point environment, the caller's environment
     restored afterwards (also when ``fn`` raises).
 
@@ -86,9 +96,21 @@ def call_in_default(fn: Callable[..., R], *args: Any) -> R:
     try:
         if not ok or not is_default():
             raise FPUStateError(_WHY)
-        return fn(*args)
+        return fn(*args, **kwargs)
     finally:
         put(saved)
+
+
+def default_env(fn: Callable[..., R]) -> Callable[..., R]:
+    """``fn`` run in the default floating-point environment (see :func:`call_in_default`);
+    a check of a few float operations when it already is the default."""
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> R:
+        if is_default():
+            return fn(*args, **kwargs)
+        return call_in_default(fn, *args, **kwargs)
+
+    return wrapper
 
 
 _WHY = ("the floating-point environment of this thread is not the default (a directed "

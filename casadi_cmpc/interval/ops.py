@@ -46,9 +46,8 @@ def _operand(a) -> np.ndarray:
 
 
 def _unary(core: Callable) -> Callable:
+    @_fpu.default_env  # the rules hold in the default floating-point environment
     def f(a):
-        if not _fpu.is_default():  # the rules hold in the default environment
-            return _fpu.call_in_default(f, a)
         a = _operand(a)
         with np.errstate(all="ignore"):
             lo, hi = core(a[..., 0], a[..., 1])
@@ -60,9 +59,8 @@ def _unary(core: Callable) -> Callable:
 
 
 def _binary(core: Callable) -> Callable:
+    @_fpu.default_env
     def f(a, b):
-        if not _fpu.is_default():
-            return _fpu.call_in_default(f, a, b)
         a = _operand(a)
         b = _operand(b)
         with np.errstate(all="ignore"):
@@ -80,20 +78,18 @@ for _n in _BINARY_NAMES + ["and_", "or_"]:
     globals()[_RENAMED.get(_n, _n)] = _binary(getattr(arith, _n))
 
 
+@_fpu.default_env
 def constpow(a, c: float) -> np.ndarray:
     """``a ** c`` for a real constant ``c``; a has shape (..., 2)."""
-    if not _fpu.is_default():
-        return _fpu.call_in_default(constpow, a, c)
     a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powc(a[..., 0], a[..., 1], c)
     return np.stack(np.broadcast_arrays(lo, hi), axis=-1)
 
 
+@_fpu.default_env
 def powi(a, n: int) -> np.ndarray:
     """``a ** n`` for an integer ``n``; a has shape (..., 2)."""
-    if not _fpu.is_default():
-        return _fpu.call_in_default(powi, a, n)
     a = _operand(a)
     with np.errstate(all="ignore"):
         lo, hi = arith.powi(a[..., 0], a[..., 1], n)

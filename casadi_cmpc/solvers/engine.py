@@ -232,6 +232,7 @@ class BnBOutcome:
     history: list[dict] = field(default_factory=list)
 
 
+@_fpu.default_env  # every rounding of a search holds in the default environment
 def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: float, *,
                      max_boxes: int = 5_000_000, time_limit: float | None = None,
                      keep_outer: bool = True, progress: bool | None = None,
@@ -286,12 +287,6 @@ def branch_and_bound(frontier: Any, classify: Callable[[Any], np.ndarray], eps: 
     run exceed ``max_boxes``, the search goes on serially from the split level instead
     (the serial result, budget included).
     """
-    if not _fpu.is_default():  # every rounding of the search holds in the default one
-        return _fpu.call_in_default(
-            lambda: branch_and_bound(frontier, classify, eps, max_boxes=max_boxes,
-                                     time_limit=time_limit, keep_outer=keep_outer,
-                                     progress=progress, desc=desc, on_level=on_level,
-                                     executor=executor, _tagged=_tagged, _raw=_raw))
     with warnings.catch_warnings():
         # in a notebook without ipywidgets tqdm.auto warns, then uses the text bar
         warnings.simplefilter("ignore")
