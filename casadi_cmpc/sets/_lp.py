@@ -73,7 +73,8 @@ def block_lp(C: np.ndarray, rows_A: np.ndarray, rows_b: np.ndarray, row_block: n
     rows_A : ndarray, shape (R, p)
         All constraint rows ``a.x_k <= b``, grouped by block (``row_block`` non-decreasing).
     rows_b : ndarray, shape (R,)
-        Right-hand sides (finite).
+        Right-hand sides, finite or ``+inf`` (a row that constrains nothing: left out, its
+        multiplier 0).
     row_block : ndarray of int, shape (R,)
         Block index of each row, non-decreasing.
     lb, ub : float or ndarray broadcastable to (K, p)
@@ -88,6 +89,8 @@ def block_lp(C: np.ndarray, rows_A: np.ndarray, rows_b: np.ndarray, row_block: n
     rows_A = np.asarray(rows_A, dtype=float).reshape(-1, p)
     rows_b = np.asarray(rows_b, dtype=float).ravel()
     row_block = np.asarray(row_block, dtype=np.int64).ravel()
+    if np.isnan(rows_b).any() or (rows_b == -np.inf).any():
+        raise ValueError("block_lp: right-hand sides must be finite or +inf")
     LB = np.broadcast_to(np.asarray(lb, dtype=float), (K, p))
     UB = np.broadcast_to(np.asarray(ub, dtype=float), (K, p))
     if row_block.size and np.any(np.diff(row_block) < 0):
@@ -117,23 +120,28 @@ def _solve_chunk(C, rows_A, rows_b, row_block, LB, UB, starts, k0, k1, status, X
     c = C[k0:k1].ravel()
     bounds = np.stack([LB[k0:k1].ravel(), UB[k0:k1].ravel()], axis=1)
     if r1 > r0:
-        A_rows = rows_A[r0:r1]
-        rr = np.repeat(np.arange(r1 - r0), p)
-        cc = ((row_block[r0:r1] - k0)[:, None] * p + np.arange(p)).ravel()
+        # a row with b = +inf constrains nothing: left out (multiplier 0)
+        live = np.flatnonzero(rows_b[r0:r1] < np.inf)
+        A_rows = rows_A[r0:r1][live]
+        rr = np.repeat(np.arange(live.size), p)
+        cc = ((row_block[r0:r1][live] - k0)[:, None] * p + np.arange(p)).ravel()
         data = A_rows.ravel()
         keep = data != 0.0
-        A = sp.csr_matrix((data[keep], (rr[keep], cc[keep])), shape=(r1 - r0, nb * p))
-        b = rows_b[r0:r1]
+        A = sp.csr_matrix((data[keep], (rr[keep], cc[keep])), shape=(live.size, nb * p))
+        b = rows_b[r0:r1][live]
+        if not live.size:
+            A, b = None, None
     else:
-        A, b = None, None
+        A, b, live = None, None, np.zeros(0, dtype=np.intp)
     st, x, f, y = _solve_one(c, A, b, bounds)
     if st == OPTIMAL:
         X[k0:k1] = x.reshape(nb, p)
         blk_fun = (C[k0:k1] * X[k0:k1]).sum(axis=1)
         fun[k0:k1] = blk_fun
         status[k0:k1] = OPTIMAL
+        Y[r0:r1] = 0.0
         if y is not None:
-            Y[r0:r1] = np.maximum(y, 0.0)
+            Y[r0 + live] = np.maximum(y, 0.0)
         return
     if nb == 1:
         status[k0] = st

@@ -124,8 +124,6 @@ def lp_separated(P: Polytope, bx: np.ndarray) -> np.ndarray:
     idx = np.flatnonzero(cand)
     if idx.size == 0:
         return proven
-    norms = np.linalg.norm(R.A, axis=1)
-    Y = res.y.reshape(K, m)[idx] / norms  # multipliers of the raw rows
-    Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0)
+    Y = R.raw_multipliers(res.y.reshape(K, m)[idx])  # multipliers of the raw rows
     proven[idx] = _certify_separation(Y, R.A, R.b, bx[idx])
     return proven

@@ -78,8 +78,7 @@ def is_empty(P: Polytope) -> bool:
             r = P._chebyshev()[1]
             y = P._cache.get("cheb_y")
             e = bool(r < 0.0 and y is not None
-                     and _farkas_empty(R.A, R.b, np.asarray(y) / np.linalg.norm(
-                         R.A, axis=1)))
+                     and _farkas_empty(R.A, R.b, R.raw_multipliers(y)))
         P._cache["empty"] = e
     return e
 
@@ -186,8 +185,7 @@ def support_upper(P: Polytope, D: np.ndarray) -> np.ndarray:
     E = np.vstack([np.eye(n), -np.eye(n)])
     P._max_lp(np.vstack([E, D]), multipliers_only=True)
     Y = np.asarray(P._last_y, dtype=float)
-    norms = np.linalg.norm(R.A, axis=1)
-    Y = np.where(np.isfinite(Y), np.maximum(Y, 0.0), 0.0) / norms
+    Y = R.raw_multipliers(np.where(np.isfinite(Y), Y, 0.0))
     A = [[Fraction(float(v)) for v in row] for row in R.A]
     b = [Fraction(float(v)) for v in R.b]
     c0 = [Fraction(float(v)) for v in R.c0]

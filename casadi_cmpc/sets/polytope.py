@@ -76,6 +76,17 @@ class _Rows(NamedTuple):
     s: float  # scale > 0
     bz: np.ndarray  # (bn - An c0) / s, rounded outward (for the LPs)
     bz0: np.ndarray  # (bn - An c0) / s, rounded to nearest (for vertex enumeration)
+    ex: np.ndarray  # (k,) int: An = A 2**-ex / ns (an exact power of two, then the norm)
+    ns: np.ndarray  # (k,) the norms of the rows A 2**-ex, in [0.5, sqrt(n)]
+
+    def raw_multipliers(self, y: np.ndarray) -> np.ndarray:
+        """Multipliers of the raw rows ``A`` from those ``y`` (..., k) of the unit rows
+        ``An``: ``y 2**-ex / ns``, made finite and non-negative (an entry that over- or
+        underflows becomes 0; what the multipliers certify is checked exactly afterwards,
+        so any finite choice is sound)."""
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            r = np.ldexp(np.asarray(y, dtype=float) / self.ns, -self.ex)
+        return np.where(np.isfinite(r), np.maximum(r, 0.0), 0.0)
 
 
 def _residual(A: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -289,23 +300,37 @@ class Polytope(SetBase):
         if r is not None:
             return r
         A, b = self.A, self.b
-        norms = np.linalg.norm(A, axis=1)
-        trivially_empty = bool(np.any(b == -np.inf) or np.any((norms == 0) & (b < 0)))
-        keep = np.isfinite(b) & (norms > 0)
-        A_k, b_k, nk = A[keep], b[keep], norms[keep]
-        An = A_k / nk[:, None]
-        bn = b_k / nk
+        # a row constrains iff one of its entries is nonzero: decided exactly (its norm
+        # computed in floating point underflows to 0 for entries below about 1e-154)
+        nonzero = (A != 0).any(axis=1)
+        trivially_empty = bool(np.any(b == -np.inf) or np.any(~nonzero & (b < 0)))
+        keep = np.isfinite(b) & nonzero
+        A_k, b_k = A[keep], b[keep]
+        # every row scaled by an exact power of two (its largest entry into [0.5, 1))
+        # before its norm is taken: neither the norm nor the unit row under- or overflows,
+        # whatever the magnitudes of the entries
+        _, ex = np.frexp(np.abs(A_k).max(axis=1, initial=0.0))
+        ex = ex.astype(np.int64)
+        As = np.ldexp(A_k, -ex[:, None])
+        ns = np.linalg.norm(As, axis=1)  # in [0.5, sqrt(n)]
+        An = As / ns[:, None]
+        with np.errstate(over="ignore"):
+            # +inf where b / |a| lies beyond the largest double: such a row excludes no
+            # point of the double range, and the LPs drop it (a superset: sound for what
+            # they prove, emptiness, separation and upper support bounds)
+            bn = np.ldexp(b_k, -ex) / ns
+        far = ~np.isfinite(bn)
         n = A.shape[1]
         if "vertices" in self._cache and len(self._cache["vertices"]):
             c0 = np.asarray(self._cache["vertices"], dtype=float).mean(axis=0)
-        elif An.shape[0]:
-            c0 = np.linalg.lstsq(An, bn, rcond=None)[0]
+        elif (~far).any():
+            c0 = np.linalg.lstsq(An[~far], bn[~far], rcond=None)[0]
         else:
             c0 = np.zeros(n)
         if not np.isfinite(c0).all():
             c0 = np.zeros(n)
         with np.errstate(over="ignore", invalid="ignore"):
-            dev = np.abs(bn - An @ c0)
+            dev = np.abs(bn - An @ c0)[~far]
             scale = float(dev.max(initial=0.0))
             if "vertices" in self._cache and len(self._cache["vertices"]):
                 # the extent of the set, not only the offsets of its rows (a sliver
@@ -319,13 +344,15 @@ class Polytope(SetBase):
         # stored rows' set satisfies the scaled rows up to the rounding of a.z
         with np.errstate(over="ignore", invalid="ignore"):
             res, res_err = _residual(A_k, b_k, c0)
-            bz0 = res / nk / scale
+            bz0 = np.ldexp(res, -ex) / ns / scale
             slack = (_gamma(n + 4) * (np.abs(bz0) + np.abs(An).sum(axis=1))
-                     + res_err / nk / scale * (1 + 4 * _U))
+                     + np.ldexp(res_err, -ex) / ns / scale * (1 + 4 * _U))
             bz = bz0 + slack
             bz = np.where(np.isfinite(bz), bz, (bn - An @ c0) / scale)
             bz0 = np.where(np.isfinite(bz0), bz0, bz)
-        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz, bz0)
+            bz[far] = bz0[far] = np.inf
+        r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz, bz0, ex,
+                  ns)
         self._cache["rows"] = r
         return r
 

@@ -197,6 +197,57 @@ def test_polytope_box_answers_survive_translation_and_scaling(n, seed, shift, lo
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31),
+       k=st.lists(st.integers(-900, 900), min_size=1, max_size=12))
+def test_rows_scaled_by_powers_of_two_give_the_same_answers(n, seed, k):
+    """Scaling a row ``a x <= b`` by 2**k (exact) leaves the set unchanged: every answer,
+    including those decided by LPs on the unit rows, is the same bit for bit, whatever the
+    magnitudes (a row norm computed in floating point underflows below about 1e-154 and
+    overflows above 1e154)."""
+    rng = np.random.default_rng(seed)
+    P0 = _base_polytope(rng, n)
+    P = cm.Polytope(P0.A, P0.b)  # as stored, nothing cached (Q has nothing either)
+    e = np.resize(np.asarray(k), P.A.shape[0])
+    Q = cm.Polytope(np.ldexp(P.A, e[:, None]), np.ldexp(P.b, e))
+    assert np.array_equal(np.ldexp(Q.A, -e[:, None]), P.A)  # the scaling was exact
+    c = rng.uniform(-6, 6, (30, n))
+    r = rng.uniform(0.01, 3, (30, n))
+    boxes = np.stack([c - r, c + r], axis=-1)
+    assert np.array_equal(P.contains_box(boxes), Q.contains_box(boxes))
+    assert np.array_equal(P.intersects_box(boxes), Q.intersects_box(boxes))
+    assert P.is_empty() == Q.is_empty() and P.is_bounded() == Q.is_bounded()
+    assert np.array_equal(P.bounding_box().as_array(), Q.bounding_box().as_array())
+    assert P.volume() == Q.volume()
+    pts = rng.uniform(-6, 6, (50, n))
+    assert np.array_equal(P.contains(pts), Q.contains(pts))
+
+
+def test_a_row_whose_norm_underflows_still_constrains():
+    """``1e-200 x <= 0`` is ``x <= 0``: no box with x > 0 is inside, the bounding box and
+    the volume see the row."""
+    A = np.array([[1e-200, 0], [1, 0], [0, 1.0], [-1, 0], [0, -1]])
+    P = cm.Polytope(A, np.array([0, 1, 1, 1, 1.0]))
+    assert not P.contains_box(np.array([[[0.25, 0.5], [0, 0.5]]]))[0]
+    assert not P.intersects_box(np.array([[[0.25, 0.5], [0, 0.5]]]))[0]
+    assert P.bounding_box().as_array()[0, 1] < 1e-12
+    assert P.volume() == pytest.approx(2.0)
+
+
+def test_a_row_beyond_the_double_range_answers_without_scipy_errors():
+    """``1e-10 x <= 1e300`` bounds x only beyond the largest double: the LPs leave it
+    out (their claims hold for a superset), and what cannot be represented is refused
+    with a clear error."""
+    A = np.array([[1e-10, 0], [0, 1.0], [-1, 0], [0, -1]])
+    P = cm.Polytope(A, np.array([1e300, 1, 1, 1]))
+    assert not P.is_empty() and P.is_bounded()
+    assert P.intersects_box(np.array([[[0, 1], [0, 1]]]))[0]
+    assert P.contains_box(np.array([[[0, 1e300], [0, 1]]]))[0]
+    assert P.bounding_box().as_array()[0, 1] == np.inf
+    with pytest.raises(cm.SolverError, match="floating-point range"):
+        P.volume()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31),
        shift=st.floats(-1e8, 1e8), log_s=st.floats(-6, 6), log_gap=st.floats(-12, 0))
 def test_union_answers_survive_translation_and_scaling(n, seed, shift, log_s, log_gap):
     rng = np.random.default_rng(seed)
