@@ -72,9 +72,11 @@ class _PolytopeTest:
     def __init__(self, A: np.ndarray, b: np.ndarray) -> None:
         A = np.asarray(A, dtype=float)
         b = np.asarray(b, dtype=float)
-        norms = np.linalg.norm(A, axis=1) if A.size else np.zeros(A.shape[0])
-        self.empty = bool(np.any(b == -np.inf) or np.any((norms == 0) & (b < 0)))
-        keep = np.isfinite(b) & (norms > 0)
+        # a row constrains iff an entry is nonzero, decided exactly (a norm computed in
+        # floating point underflows to 0 for entries below about 1e-154)
+        nonzero = (A != 0).any(axis=1)
+        self.empty = bool(np.any(b == -np.inf) or np.any(~nonzero & (b < 0)))
+        keep = np.isfinite(b) & nonzero
         self.A, self.b = A[keep], b[keep]
         self.n = A.shape[1]
         self.cones: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -92,8 +94,10 @@ class _PolytopeTest:
         if len(V) == 0:
             return
         Am, bm = Pm.A, Pm.b
-        nm = np.linalg.norm(Am, axis=1)
-        An, bn = Am / nm[:, None], bm / nm
+        R = Pm._rows()
+        if R.A.shape != Am.shape:  # a row of Pm that constrains nothing: rows alone
+            return
+        An, bn = R.An, R.bn  # unit rows, without under- or overflow
         scale = max(1.0, float(np.abs(bn).max(initial=0.0)), float(np.abs(V).max()))
         act = np.abs(V @ An.T - bn[None, :]) <= 1e-9 * scale  # (k_v, rows)
         kmax = max(int(act.sum(axis=1).max()), 1)

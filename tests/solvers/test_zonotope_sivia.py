@@ -110,6 +110,22 @@ def test_inner_zonotopes_3d_and_1d():
     assert 2.95 < res1.volume() <= 3.0
 
 
+@pytest.mark.parametrize("tiny", [1e-200, 1e-160, 1e-3])
+def test_inner_zonotopes_respect_a_row_whose_norm_underflows(tiny):
+    """``tiny x <= 0`` is ``x <= 0`` whatever the magnitude: the inner zonotopes (proven
+    inside the rows) stay in x <= 0, and the polytope's volume sees the row."""
+    A = np.array([[tiny, 0], [1, 0], [0, 1.0], [-1, 0], [0, -1]])
+    P = cm.Polytope(A, np.array([0, 1, 1, 1, 1.0]))
+    res = inner_zonotopes(P, 0.1)
+    assert len(res.inner) > 0
+    pts = res.inner.sample(20, rng=0).reshape(-1, 2)
+    assert (pts[:, 0] <= 0).all()
+    # the same rows up to a positive factor: the same search
+    ref = inner_zonotopes(cm.Polytope(np.array([[1.0, 0], [1, 0], [0, 1], [-1, 0], [0, -1]]),
+                                      np.array([0, 1, 1, 1, 1.0])), 0.1)
+    assert res.volume() == pytest.approx(ref.volume()) and 1.0 < res.volume() <= 2.0
+
+
 # ----------------------------------------------------------------------------- frontier
 def _awkward_frontier(rng, N=30, n=2, p=3):
     C = rng.normal(size=(N, n)) * 1e3 + np.pi
