@@ -448,6 +448,39 @@ def _inside_on_cell(P: Polytope, cell: np.ndarray, nl: list[int], j: int
     return (lo, hi) if hi > lo else None
 
 
+def _slice_range(A: np.ndarray, b: np.ndarray, cells: np.ndarray, nl: list[int], j: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Outer bounds ``(lo, hi)`` (B,) of ``x_j`` over ``{x : A x <= b, x_nl in cell}`` for
+    each cell (B, p, 2) of the x_NL grid, ``j`` the one remaining coordinate, in closed
+    form: a row with ``a_j > 0`` gives ``x_j <= (b - min_cell a_nl.x_nl) / a_j``, one with
+    ``a_j < 0`` a lower bound, and a row with ``a_j = 0`` that no point of the cell meets
+    proves the slice empty (``lo = +inf``). The sums are rounded outward by an a-priori
+    bound of their error, the quotients by one ulp; a NaN (an overflow) decides nothing.
+    The bounds contain the exact range, which an LP may make tighter."""
+    B, p = cells.shape[0], len(nl)
+    k = A.shape[0]
+    if k == 0:
+        return np.full(B, -np.inf), np.full(B, np.inf)
+    An = A[:, nl]  # (k, p)
+    lo, hi = cells[:, None, :, 0], cells[:, None, :, 1]  # (B, 1, p)
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = np.minimum(An[None] * lo, An[None] * hi)  # (B, k, p)
+        m = b[None, :] - t.sum(axis=2)  # (B, k)
+        mag = np.abs(b)[None, :] + (np.abs(An)[None] * np.maximum(np.abs(lo), np.abs(hi))
+                                    ).sum(axis=2)
+        g = (p + 3) * 2.0 ** -53 / (1 - (p + 3) * 2.0 ** -53)
+        m_up = m + (g * mag + (p + 2) * 2.0 ** -1074) * (1 + 2.0 ** -52)
+        a = A[:, j]
+        q = m_up / np.where(a == 0, 1.0, a)[None, :]
+        up = np.where(a[None, :] > 0, np.nextafter(q, np.inf), np.inf)
+        dn = np.where(a[None, :] < 0, np.nextafter(q, -np.inf), -np.inf)
+        hi_j = np.where(np.isnan(up), np.inf, up).min(axis=1)
+        lo_j = np.where(np.isnan(dn), -np.inf, dn).max(axis=1)
+        void = ((a[None, :] == 0) & (m_up < 0)).any(axis=1)
+    lo_j[void] = np.inf
+    return lo_j, hi_j
+
+
 def scaled_polytope(details: dict[str, Any], prev: Polytope, D: Box, eps: float = 1e-3
                     ) -> Polytope | None:
     """Alg 6.5 for one linear state, with a proof that scales: the largest ``x0 + α (H -
@@ -498,13 +531,20 @@ def scaled_polytope(details: dict[str, Any], prev: Polytope, D: Box, eps: float 
         if PD.is_empty():
             return False
         bb = PD.bounding_box().as_array()
+        # first, per cell, the x_L range in closed form (no LP): sound outer bounds, so a
+        # range inside a cover interval, or proven empty, settles the cell
+        lo_c, hi_c = _slice_range(np.asarray(PD.A), np.asarray(PD.b), boxes, nl, j)
         for b in range(boxes.shape[0]):
             cell = boxes[b]
             if np.any(cell[:, 1] < bb[nl, 0]) or np.any(cell[:, 0] > bb[nl, 1]):
                 continue  # the candidate does not reach this cell
+            if lo_c[b] > hi_c[b]:
+                continue  # proven: no point of the candidate over this cell
             iv = cover.get(b)
             if not iv:
                 return False
+            if any(a <= lo_c[b] and hi_c[b] <= c for a, c in iv):
+                continue
             S = Polytope(np.vstack([PD.A, np.eye(D.dim)[nl], -np.eye(D.dim)[nl]]),
                          np.concatenate([PD.b, cell[:, 1], -cell[:, 0]]))
             if S.is_empty():  # numerically: bound its x_L by the candidate's (rigorous) box

@@ -259,3 +259,65 @@ def test_membership_by_cells_equals_the_test_of_every_piece(e11):
     assert np.array_equal(res.contains(X), ref >= 0)
     i = int(np.flatnonzero(ref[:600] >= 0)[0])
     assert np.array_equal(res.control(X[i]), res.witness[ref[i]])
+
+
+# ------------------------------------------------- Alg 6.5's closed-form slice ranges
+def _exact_slice(A, b, x_nl, nl, j):
+    """The exact x_j interval of ``{A x <= b}`` at the point x_nl (rationals): (lo, hi),
+    None when empty."""
+    from fractions import Fraction as F
+
+    lo, hi = None, None
+    for row, c in zip(A, b, strict=True):
+        rest = F(float(c)) - sum((F(float(row[i])) * F(float(v)) for i, v in zip(nl, x_nl,
+                                                                             strict=True)),
+                                 F(0))
+        a = F(float(row[j]))
+        if a == 0:
+            if rest < 0:
+                return None
+        elif a > 0:
+            hi = rest / a if hi is None else min(hi, rest / a)
+        else:
+            lo = rest / a if lo is None else max(lo, rest / a)
+    if lo is not None and hi is not None and lo > hi:
+        return None
+    return lo, hi
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), p=st.integers(1, 3), k=st.integers(1, 8),
+       log_s=st.floats(-6, 6), shift=st.floats(-1e6, 1e6))
+def test_slice_ranges_contain_the_exact_ranges(seed, p, k, log_s, shift):
+    """The closed-form x_L range of every grid cell contains the exact range at every
+    sampled x_NL of the cell (rationals), and a slice it calls empty has no point."""
+    from casadi_cmpc.control.affine_state import _slice_range
+
+    rng = np.random.default_rng(seed)
+    n = p + 1
+    s = 10.0 ** log_s
+    A = rng.normal(size=(k, n))
+    A[rng.random((k, n)) < 0.2] = 0.0
+    c = shift * rng.uniform(-1, 1, n)
+    b = A @ c + s * rng.uniform(-0.5, 2.0, k)
+    nl, j = list(range(p)), p
+    lo = c[nl] + s * rng.uniform(-2, 2, (12, p))
+    cells = np.stack([lo, lo + s * rng.uniform(0.01, 1.0, (12, p))], axis=-1)
+    L, H = _slice_range(A, b, cells, nl, j)
+    for q in range(cells.shape[0]):
+        pts = rng.uniform(cells[q, :, 0], cells[q, :, 1], (15, p))
+        pts = np.vstack([pts, cells[q, :, 0], cells[q, :, 1]])
+        for x in pts:
+            got = _exact_slice(A, b, x, nl, j)
+            if got is None:
+                continue
+            assert not L[q] > H[q]  # a slice called empty has this point's interval
+            glo, ghi = got
+            if glo is not None:
+                assert L[q] <= glo
+            if ghi is not None:
+                assert ghi <= H[q]
+            if glo is None:
+                assert L[q] == -np.inf
+            if ghi is None:
+                assert H[q] == np.inf
