@@ -842,7 +842,13 @@ def _export(args: Any) -> int:
         print(f"cmpc export: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not args.overwrite)):
+    bad = _unwritable_file(out / "x") if not out.is_dir() else None
+    if out.exists() and not out.is_dir():
+        bad = "is a file; --out names a directory for the C sources"
+    if bad:
+        print(f"cmpc export: --out {out}: {bad}", file=sys.stderr)
+        return 2
+    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
         print(f"cmpc export: {out} exists and is not an empty directory (use --overwrite)",
               file=sys.stderr)
         return 2
@@ -1035,6 +1041,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _unwritable_file(path: Path) -> str | None:
+    """Why a file cannot be written at ``path`` (a directory there, or a path component
+    that is a file), or None."""
+    if path.is_dir():
+        return "is a directory; give a file name (e.g. run.npz)"
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                return f"{parent} is a file, not a directory"
+            break
+    return None
+
+
 def _command(parser: Any, args: Any) -> int:
     """Run the parsed command."""
     if args.command == "export":
@@ -1053,6 +1072,12 @@ def _command(parser: Any, args: Any) -> int:
         parser.error("--workers must be at least 1")
     if args.eps is not None and not (np.isfinite(args.eps) and args.eps > 0):
         parser.error("--eps must be a positive number")
+    if args.seed < 0:
+        parser.error("--seed must be a non-negative integer")
+    if args.checkpoint is not None:
+        bad = _unwritable_file(Path(args.checkpoint))
+        if bad:
+            parser.error(f"--checkpoint {args.checkpoint}: {bad}")
     return _run(args.example, args.out, args.steps, args.seed,
                 False if args.no_progress else None, args.controller, args.cache,
                 args.checkpoint, args.workers, args.scheduler, args.eps)

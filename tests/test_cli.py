@@ -216,6 +216,35 @@ def test_list_says_what_every_example_is(capsys):
     assert "8 states, 2 inputs" in by_name["mirosot"] and "obstacle" in by_name["mirosot"]
 
 
+@pytest.mark.parametrize("args, says", [
+    (["run", "grimm", "--seed", "-1"], "--seed must be a non-negative integer"),
+    (["run", "grimm", "--eps", "nan"], "--eps must be a positive number"),
+    (["run", "grimm", "--workers", "0"], "--workers must be at least 1"),
+])
+def test_bad_numbers_are_refused_by_the_parser(args, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_unwritable_checkpoint_and_export_paths_are_refused_clearly(tmp_path, capsys):
+    """A path under a regular file, a directory given as the checkpoint file, a file given
+    as the export directory (with or without --overwrite): one clear line, exit code 2, no
+    traceback, nothing computed."""
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    for ck, says in ((blocker / "x.npz", "is a file, not a directory"),
+                     (tmp_path, "is a directory")):
+        with pytest.raises(SystemExit) as exc:
+            main(["run", "cannon", "--checkpoint", str(ck), "--no-progress"])
+        assert exc.value.code == 2 and says in capsys.readouterr().err
+    for out, extra in ((blocker, ["--overwrite"]), (blocker, []), (blocker / "sub", [])):
+        assert main(["export", "cannon", "--out", str(out), "--no-progress", *extra]) == 2
+        err = capsys.readouterr().err
+        assert "is a file" in err and "Traceback" not in err
+    assert blocker.read_text() == "not a directory"
+
+
 def test_missing_command_is_an_error():
     with pytest.raises(SystemExit):
         main([])
