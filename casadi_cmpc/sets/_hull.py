@@ -116,7 +116,8 @@ def affine_hull(points: np.ndarray, rtol: float = RANK_RTOL, max_rank: int | Non
     # scale first: differences of huge coordinates must not overflow inside the SVD
     dmax = float(np.abs(D).max())
     D = D / dmax
-    _, s, Vt = np.linalg.svd(D, full_matrices=True)
+    # the complement needs all n right singular vectors, never the N x N left ones
+    _, s, Vt = np.linalg.svd(D, full_matrices=D.shape[0] < n)
     n_distinct = np.unique(P, axis=0).shape[0]
     # thickness at the rounding level of the coordinates themselves is no dimension
     floor = FLAT_ULPS * _U * math.sqrt(P.shape[0]) * float(np.abs(P).max()) / dmax

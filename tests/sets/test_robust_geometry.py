@@ -450,3 +450,12 @@ def test_flat_clouds_never_raise_and_contain_their_points(n, seed, shift, log_re
     V = (rng.standard_normal((N, r)) @ rng.standard_normal((r, n))) * spread \
         + shift * rng.uniform(0.5, 1.5, n)
     _check_flat_cloud(V)
+
+
+def test_hull_of_many_points_needs_no_n_by_n_matrix():
+    """The affine hull of N points takes the n right singular vectors only: 60 000 points
+    (a full N x N factor would need 29 GB) give their hull, which holds them."""
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(60_000, 3))
+    P = cm.Polytope.from_vertices(pts)
+    assert P.contains(pts[::97]).all() and P.is_full_dimensional()
