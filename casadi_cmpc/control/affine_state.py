@@ -738,7 +738,7 @@ def affine_state_sequence(model: Model, T: Polytope, eps: float, *, robust: bool
     """
     from tqdm.auto import tqdm
 
-    from .controllable import about_model
+    from .controllable import about_model, proof_w_box
     from .linear_sets import SetSequence
     from .polytopic import inner_polytope
 
@@ -746,7 +746,7 @@ def affine_state_sequence(model: Model, T: Polytope, eps: float, *, robust: bool
     _, _, semantics = _semantics(model, robust)
     seq = SetSequence(sets=[T], info={
         "model": model.name, "eps": eps, "robust": bool(robust), "semantics": semantics,
-        "about": about_model(model, robust),
+        "about": about_model(model, robust), "proof_W": proof_w_box(model, robust),
         "method": "affine state (Alg 6.4) with polytopic approximation "
                   f"({'Alg 6.5' if polytopic_method == 'scaling' else 'Alg 6.2'})",
         "polytopic": True, "state_names": list(model.state_names), **terminal_info})

@@ -563,6 +563,16 @@ def _search(model: Model, target: _Target, X0: np.ndarray, eps: float, *, robust
             "semantics": semantics}
 
 
+def proof_w_box(model: Model, robust: bool) -> list[list[float]] | None:
+    """The disturbances the sets of a computation are proven for, as ``[lo, hi]`` lists
+    (W when robust, the thin box at its centre when nominal; None without disturbance):
+    what a controller driving along them may claim (stored in a sequence's info)."""
+    if not model.l:
+        return None
+    Wb, _, _ = _w_setup(model, robust, None)
+    return [Wb[:, 0].tolist(), Wb[:, 1].tolist()]
+
+
 def _domain(model: Model, X: Any) -> Box:
     if X is None:
         D = model.X
@@ -1204,6 +1214,7 @@ def controllable_sets(model: Model, T: Any, eps: float, *, robust: bool = False,
     def info_of(tinfo: dict[str, Any]) -> dict[str, Any]:
         return {"model": model.name, "eps": eps, "robust": bool(robust),
                 "semantics": semantics, "about": about_model(model, robust),
+                "proof_W": proof_w_box(model, robust),
                 "polytopic": bool(polytopic),
                 "terminal_certificate": tinfo["terminal_certificate"],
                 "state_names": [f"x{i + 1}" for i in range(model.n)], **tinfo}

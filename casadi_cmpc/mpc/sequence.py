@@ -375,6 +375,15 @@ class SetSequenceMPC:
                           "controllable for this model, so no bound on the steps to T is "
                           "claimed; each applied control is still certified on this model",
                           CmpcWarning, stacklevel=2)
+        # the sets must be proven for every w this controller claims: a sequence computed
+        # for a smaller W (or nominally) bounds no steps to T for this W
+        self._other_w = not self._other_model and not self._sets_cover_w()
+        if self._other_w:
+            warnings.warn("the sequence's sets are proven for the disturbances "
+                          f"{seq.info.get('proof_W')} (robust={seq.info.get('robust')}), "
+                          f"not for every w this controller claims ({self._Wbox.tolist()}): "
+                          "no bound on the steps to T is claimed; each applied control is "
+                          "still certified for the controller's W", CmpcWarning, stacklevel=2)
         self._w_vertices = (np.asarray(model.W.vertices()) if self.robust else
                             self._Wbox[:, 0][None]) if model.l else np.zeros((1, 0))
         self._targets: dict[int, Any] = {}
@@ -457,6 +466,21 @@ class SetSequenceMPC:
                 np.all(np.asarray(Wc[0]) <= need[:, 0])
                 and np.all(need[:, 1] <= np.asarray(Wc[1])))
         return ca.Function("law", [model.x], [expr]), proved
+
+    def _sets_cover_w(self) -> bool:
+        """Whether the sequence's sets are proven for every w of this controller's box
+        (its info's ``proof_W``; a sequence saved without it: its robust flag and the
+        model's W)."""
+        if not self.model.l:
+            return True
+        info = self.seq.info
+        pw = info.get("proof_W")
+        if pw is None:  # an older file: robust sets are about the model's W, nominal
+            return bool(info.get("robust", False)) or not self.robust  # ones its centre
+        lo, hi = np.asarray(pw[0], dtype=float), np.asarray(pw[1], dtype=float)
+        need = self._Wbox
+        return lo.shape == need[:, 0].shape and bool(
+            np.all(lo <= need[:, 0]) and np.all(need[:, 1] <= hi))
 
     def _gauge(self, gauge: Polytope | None) -> Polytope:
         """The gauge polytope of (3.9): the given one, else the terminal set T = K_0 (a
@@ -763,6 +787,12 @@ class SetSequenceMPC:
                if self._law_proved else
                "inside T the local law is applied, but T's invariance under it is NOT "
                "proven, so staying in T is not guaranteed")
+        if self._other_w:
+            return (f"the sets K_i are proven for w in {self.seq.info.get('proof_W')} only, "
+                    f"not for every w this controller claims: a control certified to bring "
+                    f"the state into K_(i-1){w} is applied where one is found (the step says "
+                    "so in its label), but that one exists at every step is not proven, so "
+                    f"reaching T is not guaranteed; {law}")
         if self._other_model:
             return (f"the sets K_i were computed for another model "
                     f"('{self.seq.info.get('model')}'): a control certified on this model to "

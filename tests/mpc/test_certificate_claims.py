@@ -233,3 +233,38 @@ def test_a_sequence_of_another_model_claims_no_step_bound() -> None:
     r = ctrl.solve(np.zeros(2))
     assert r.certificate.label == "local_law" and r.certificate.proved is None
     assert "another map f" in r.certificate.reason
+
+
+@pytest.mark.parametrize("robust_seq, scale", [(True, 3.0), (True, 1.0), (False, 1.0),
+                                               (True, 0.5)])
+def test_a_sequence_for_a_smaller_w_claims_no_step_bound(robust_seq, scale) -> None:
+    """The sets must be proven for every w the controller claims: a sequence computed for
+    W (or nominally) used by a robust controller of the same f with a W scaled by
+    ``scale``: the step bound only when the sets cover the controller's W; otherwise a
+    warning and "not guaranteed". The sequence says for which w its sets hold."""
+    m = _model()
+    seq = cm.controllable_sets(m, T, 0.25, robust=robust_seq, law=np.zeros((1, 2)),
+                               max_steps=2, progress=False)
+    expect = [[-0.1], [0.1]] if robust_seq else [[0.0], [0.0]]
+    assert seq.info["proof_W"] == expect
+    W2 = cm.Box(m.W.lo * scale, m.W.hi * scale)
+    m2 = cm.Model(x=m.x, u=m.u, w=m.w, f=m.f, X=m.X, U=m.U, W=W2, name=m.name)
+    covered = robust_seq and scale <= 1.0
+    if covered:
+        ctrl = cm.SetSequenceMPC(m2, seq, solver="sqp")
+        assert "reached in at most i steps" in ctrl.guarantee
+    else:
+        with pytest.warns(cm.CmpcWarning, match="not for every w"):
+            ctrl = cm.SetSequenceMPC(m2, seq, solver="sqp", robust=True)
+        assert "at most i steps" not in ctrl.guarantee and "not guaranteed" in ctrl.guarantee
+
+def test_a_saved_sequence_keeps_the_w_of_its_proofs(tmp_path) -> None:
+    m = _model()
+    seq = cm.controllable_sets(m, T, 0.25, robust=True, law=np.zeros((1, 2)), max_steps=2,
+                               progress=False)
+    seq.save(tmp_path / "s.npz")
+    back = SetSequence.load(tmp_path / "s.npz")
+    assert back.info["proof_W"] == [[-0.1], [0.1]]
+    big = cm.Model(x=m.x, u=m.u, w=m.w, f=m.f, X=m.X, U=m.U, W=cm.Box([-0.2], [0.2]))
+    with pytest.warns(cm.CmpcWarning, match="not for every w"):
+        cm.SetSequenceMPC(big, back, solver="sqp")
