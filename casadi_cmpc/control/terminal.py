@@ -255,16 +255,23 @@ def _modal_scaling(T: np.ndarray, blocks: list[list[int]], limits: np.ndarray,
 
 
 def _lp_max(A: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """``max c.x s.t. A x <= 1`` for every row c of C (floating point, HiGHS)."""
-    from scipy.optimize import linprog
+    """``max c.x s.t. A x <= 1`` for every row c of C (floating point, HiGHS, all rows of
+    C in one stacked LP); ``+inf`` where unbounded or not solved.
 
-    out = np.empty(C.shape[0])
-    n = A.shape[1]
-    for i, c in enumerate(C):
-        r = linprog(-c, A_ub=A, b_ub=np.ones(A.shape[0]), bounds=[(None, None)] * n,
-                    method="highs")
-        out[i] = -r.fun if r.status == 0 else np.inf
-    return out
+    The variables are scaled by exact powers of two, ``x = D z`` with the largest entry of
+    every column of ``A D`` in [0.5, 1), so that the LP does not depend on the units of the
+    states (a set a thousand times smaller gives HiGHS the same problem)."""
+    from ..sets import _lp
+
+    A = np.asarray(A, dtype=float)
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    K, n = C.shape
+    _, e = np.frexp(np.abs(A).max(axis=0, initial=0.0))
+    e = np.where(np.abs(A).max(axis=0, initial=0.0) > 0, e, 0).astype(np.int64)
+    AD, CD = np.ldexp(A, -e[None, :]), np.ldexp(C, -e[None, :])
+    m = A.shape[0]
+    res = _lp.block_lp(-CD, np.tile(AD, (K, 1)), np.ones(K * m), np.repeat(np.arange(K), m))
+    return np.where(res.status == _lp.OPTIMAL, -res.fun, np.inf)
 
 
 def _unit_shapes(P: np.ndarray, Acl: np.ndarray, limits: np.ndarray, rows: np.ndarray

@@ -209,3 +209,35 @@ def test_disturbance_floor_is_per_facet():
     assert floor == pytest.approx(0.3 / 0.7)  # the fast facet x_0: 0.3 s + 0.3 <= s
     res = cm.terminal_set(m, law, shape="modal", progress=False)
     _check_result(m, res, eps=0.05)
+
+
+def _scaled_model3(s: float) -> tuple[cm.Model, np.ndarray, np.ndarray]:
+    """A 3-state model with a non-zero equilibrium (1, -0.5, 2), u_eq = 2.25, an additive
+    w on x3, in the coordinates ``z = s x``."""
+    import casadi as ca
+
+    z, u, w = ca.SX.sym("x", 3), ca.SX.sym("u"), ca.SX.sym("w")
+    x = z / s
+    f = ca.vertcat(x[0] + 0.1 * x[1] + 0.05 + 0.02 * ca.sin(x[2] - 2),
+                   x[1] + 0.1 * x[2] - 0.2 - 0.05 * (x[0] - 1) ** 2,
+                   0.9 * x[2] + 0.1 * u + 0.05 * x[0] * x[1] + w)
+    lo, hi = np.array([0.0, -1.5, 1.0]), np.array([2.0, 0.5, 3.0])
+    m = cm.Model(x=z, u=u, w=w, f=f * s, X=cm.Box(lo * s, hi * s), U=cm.Box([0.0], [4.5]),
+                 W=cm.Box([-0.005], [0.005]), name="m3")
+    return m, np.array([1.0, -0.5, 2.0]) * s, np.array([2.25])
+
+
+@pytest.mark.parametrize("s", [1e-3, 1e3])
+def test_terminal_set_does_not_depend_on_the_units_of_the_states(s):
+    """The states in other units (z = s x): the same scale of the same shape is proven
+    (the candidates' LPs are scaled; unscaled, HiGHS failed at s = 1e-3 and nothing was
+    tried)."""
+    ref_m, xe, ue = _scaled_model3(1.0)
+    ref = cm.terminal_set(ref_m, cm.local_lqr(ref_m, Q=100 * np.eye(3), R=1.0, x_eq=xe,
+                                              u_eq=ue), progress=False)
+    m, xe, ue = _scaled_model3(s)
+    res = cm.terminal_set(m, cm.local_lqr(m, Q=100 * np.eye(3) / s ** 2, R=1.0, x_eq=xe,
+                                          u_eq=ue), progress=False)
+    assert ref.status == res.status == cm.Status.PROVED
+    assert res.scale == pytest.approx(ref.scale, rel=1e-6)
+    assert res.scale_limit == pytest.approx(ref.scale_limit, rel=1e-6)
