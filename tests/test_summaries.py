@@ -265,6 +265,16 @@ def test_a_stopped_search_without_inner_box_is_not_called_empty():
     assert res.verdict == "no box proven inside: 1 undecided box (the search was stopped)"
 
 
+def test_a_completed_one_step_search_without_inner_box_is_not_called_stopped():
+    """A one-step search that ran to completion and proved nothing: UNDECIDED, and its
+    undecided boxes are at eps, not left by a stop."""
+    ex = cm.models.load("cannon_robust")
+    K = cm.one_step_set(ex.model, ex.terminal, eps=5.0, robust=True, progress=False)
+    assert K.status == Status.UNDECIDED and K.paving.n_inner == 0
+    assert K.verdict.endswith("(narrower than eps)") and "stopped" not in K.verdict
+    assert "search completed" in K.message
+
+
 def test_volume_of_a_result_is_the_proven_one_by_default():
     res = cm.sivia(_disk(), cm.Box([-2, -2], [2, 2]), cm.Box([0], [1]), eps=0.1,
                    progress=False)

@@ -365,8 +365,9 @@ class OneStepSet(SetResult):
         (``robust=False`` with a disturbance; w at the centre of W), or ``"for all w
         exists u (u may depend on w)"`` (modal method: a weaker statement).
     status : Status
-        PROVED when the search ran to completion (the boundary boxes are narrower than eps),
-        BUDGET when a limit stopped it.
+        PROVED when the search ran to completion and proved some box (the boundary boxes
+        are narrower than eps), UNDECIDED when it completed without proving any box (or
+        DISPROVED when every box is proven outside), BUDGET when a limit stopped it.
     pieces : PolytopeUnion or None
         For ``method="affine_state"`` (thesis Alg 6.4) the set is this union of polytopes,
         each proven in the set with its control ``witness[k]`` (then ``witness`` has one

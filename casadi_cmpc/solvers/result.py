@@ -352,8 +352,10 @@ class SetResult(Result):
                     "undecided")
         if not n_bd:
             return "proved: the set is empty in the domain (every box is proven outside)"
-        why = ("narrower than eps" if self.status == Status.PROVED
-               else "the search was stopped")
+        # a completed search (PROVED, or UNDECIDED when nothing was proven) leaves its
+        # undecided boxes at eps; a budget or an interruption leaves unexplored ones
+        why = ("the search was stopped" if self.status == Status.BUDGET
+               else "narrower than eps")
         return (f"no box proven inside: {n_bd} undecided box{'es' if n_bd != 1 else ''} "
                 f"({why})")
 
