@@ -664,6 +664,11 @@ def _plant_text(model: Any, run: dict) -> str:
     integrated accurately) or the model's own map."""
     plant = run.get("plant")
     if plant is None:
+        if getattr(model, "is_validated", False):
+            # simulate() evaluates model.function: the Taylor polynomial, not the flow
+            return ("the model's Taylor polynomial without its remainder (a point map "
+                    "inside the certified enclosure, not the ODE itself; pass a plant to "
+                    "cm.simulate to run on the ODE)")
         return f"the model's own map ({model.discretisation})"
     doc = (getattr(plant, "__doc__", None) or "").strip().splitlines()
     return f"the plant {getattr(plant, '__name__', 'given')}()" + (

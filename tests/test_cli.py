@@ -245,6 +245,23 @@ def test_unwritable_checkpoint_and_export_paths_are_refused_clearly(tmp_path, ca
     assert blocker.read_text() == "not a directory"
 
 
+def test_what_the_closed_loops_run_on_is_named_as_it_is():
+    """cstr_validated has no plant: simulate() evaluates its Taylor polynomial (without the
+    remainder), which the run must not call the validated ODE."""
+    from casadi_cmpc.cli import _plant_text
+
+    ex = cm.models.load("cstr_validated")
+    assert ex.info["run"].get("plant") is None and ex.model.is_validated
+    text = _plant_text(ex.model, ex.info["run"])
+    assert text.startswith("the model's Taylor polynomial without its remainder")
+    assert "validated" not in text
+    mg = cm.models.load("moore_greitzer")
+    assert _plant_text(mg.model, mg.info["run"]).startswith("the plant ")
+    plain = cm.models.load("cannon")
+    assert _plant_text(plain.model, plain.info["run"]) == \
+        f"the model's own map ({plain.model.discretisation})"
+
+
 def test_missing_command_is_an_error():
     with pytest.raises(SystemExit):
         main([])
