@@ -18,6 +18,8 @@ and inherits ``plot(ax=None, **kw)`` (2-D drawing; ``dims=(i, j)`` projects high
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from abc import ABCMeta, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar
@@ -287,7 +289,8 @@ def load_set(path: str | Path) -> SetBase:
                     if key.startswith("a_"):
                         state[key[2:]] = np.array(data[key])
     except (ValueError, KeyError, TypeError, AttributeError, OSError, EOFError,
-            UnicodeDecodeError) as exc:
+            UnicodeDecodeError, zipfile.BadZipFile, zlib.error) as exc:
+        # (a truncated or damaged archive: BadZipFile, a zlib error, an EOF)
         detail = str(exc)
         if "pickle" in detail:  # numpy's hint to unpickle would mislead: never unpickle
             detail = "the archive holds an entry that is not a plain numeric or text array"
