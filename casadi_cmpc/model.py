@@ -31,6 +31,19 @@ def _is_symbolic_vector(s: Any) -> bool:
                                                             for i in range(s.numel())))
 
 
+def _check_name(name: Any) -> str:
+    """The model's name, refused unless CasADi accepts it, and its derived function names
+    (``<name>_f``...), as a Function name: a letter first, then letters, digits and single
+    underscores, no trailing underscore."""
+    text = str(name)
+    if not (ca.Function.check_name(text) and ca.Function.check_name(text + "_f")):
+        raise ModelError(f"model name {text!r} is not usable: the functions generated from "
+                         "the model carry it, so it must start with a letter and contain "
+                         "only letters, digits and single underscores, not ending with one "
+                         "(e.g. 'my_model')")
+    return text
+
+
 def _check_symbol(s: Any, name: str) -> None:
     if not isinstance(s, ca.SX):
         raise TypeError(f"{name} must be a casadi.SX column of symbols; got {type(s).__name__}")
@@ -263,7 +276,7 @@ class Model:
             U = Box(np.zeros(0), np.zeros(0))
         _check_free(f, [x, u, w], "f")
         self.x, self.u, self.w, self.f = x, u, w, f
-        self.name = str(name)
+        self.name = _check_name(name)
         self.X = _as_model_box(X, n, "X")
         self.U = _as_model_box(U, m, "U")
         self.W = _as_model_box(W, w.numel(), "W") if w is not None else None

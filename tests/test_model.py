@@ -688,3 +688,14 @@ def test_from_ode_passes_names_units_and_the_sampling_time_in_seconds():
         cm.Model.from_ode(x, u, rhs, dt=0.1, time_unit=0.0, **box)
     with pytest.raises(TypeError, match="unexpected"):
         cm.Model.from_ode(x, u, rhs, dt=0.1, colour="red", **box)
+
+
+@pytest.mark.parametrize("name", ["my model", "a-b", "a.b", "1a", "_a", "a__b", "a_", "aé"])
+def test_a_name_casadi_cannot_carry_is_refused_at_once(name):
+    """The generated functions carry the model's name: a name CasADi refuses is refused
+    when the model is made, with a clear error (not at its first use, inside CasADi)."""
+    x, u = ca.SX.sym("x"), ca.SX.sym("u")
+    with pytest.raises(ModelError, match="is not usable"):
+        cm.Model(x, u, x + u, X=cm.Box([-1], [1]), U=cm.Box([-1], [1]), name=name)
+    ok = cm.Model(x, u, x + u, X=cm.Box([-1], [1]), U=cm.Box([-1], [1]), name="my_model_2")
+    assert ok.name == "my_model_2" and ok.function.name().startswith("my_model_2")
