@@ -233,7 +233,8 @@ class SetSequenceMPC:
         Certify and optimise for all w in W (default: ``seq.info["robust"]``, else True
         when the model has a disturbance); False uses the centre of W.
     x_ref : array_like (n,), optional
-        The cost penalises ``f - x_ref`` (default 0).
+        The cost penalises ``f - x_ref`` (default: the equilibrium ``x_eq`` of a
+        :class:`~casadi_cmpc.LinearLaw` given as ``local_law``, else 0).
     solver_options : dict, optional
         Passed to ``casadi.nlpsol``.
     minimax : {"auto", "vertices", "interval"}
@@ -360,6 +361,8 @@ class SetSequenceMPC:
         self.model, self.seq, self.solver = model, seq, solver
         self.Q = weight_matrix(Q, n, "Q", definite=False, default=np.eye(n))
         self.R = weight_matrix(R, m, "R", definite=False, default=np.eye(m))
+        if x_ref is None:  # the equilibrium of the local law, when it names one
+            x_ref = getattr(local_law, "x_eq", None)
         self.x_ref = float_vector(x_ref, n, "x_ref", np.zeros(n))
         if robust is None:
             robust = bool(seq.info.get("robust", model.l > 0))

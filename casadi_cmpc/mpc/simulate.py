@@ -90,6 +90,8 @@ class Trajectory:
     guarantee : str
         The controller's ``guarantee`` (what its closed loop is proven to do, for which
         disturbances); empty when it states none.
+    x_ref : ndarray (n,) or None
+        The state the controller regulates to (its ``x_ref``); None when it has none.
     violations : mapping
         ``"state"``: number of states ``x(k)``, ``k >= 1``, outside the model's X;
         ``"input"``: number of inputs ``u(k)`` outside U; ``"state_steps"``,
@@ -145,6 +147,7 @@ class Trajectory:
     level: tuple = ()
     proof_covers_w: tuple = ()
     guarantee: str = ""
+    x_ref: Any = None
 
     def __post_init__(self) -> None:
         x = np.array(self.x, dtype=float)
@@ -242,7 +245,9 @@ class Trajectory:
 
         Keys: ``model``, ``n``, ``m``, ``l``, ``steps``, ``stop_reason``, ``interrupted``,
         ``disturbance``, ``seed``, ``x0``, ``final_state``, ``final_norm_inf`` (max-norm of
-        ``x(K)``), ``violations`` (counts and step indices), ``certificates``, ``statuses``,
+        ``x(K)`` itself), ``final_error_inf`` (max-norm of ``x(K) - x_ref``, the state the
+        controller regulates to; None for a controller without ``x_ref``), ``violations``
+        (counts and step indices), ``certificates``, ``statuses``,
         ``modes`` (counts per value, ``"none"`` for None), ``proven_steps`` (steps whose
         certificate's claim holds for the w applied: status PROVED, or ``"ok"`` with a
         certificate, as the set-sequence controllers report it, and a w inside the
@@ -298,6 +303,8 @@ class Trajectory:
             "x0": _json_floats(self.x[0]),
             "final_state": _json_floats(self.x[-1]),
             "final_norm_inf": _json_float(np.max(np.abs(self.x[-1]))),
+            "final_error_inf": (None if self.x_ref is None else _json_float(
+                np.max(np.abs(self.x[-1] - np.asarray(self.x_ref, dtype=float))))),
             "violations": {"state": self.violations["state"], "input": self.violations["input"],
                            "state_steps": list(self.violations["state_steps"]),
                            "input_steps": list(self.violations["input_steps"])},
@@ -331,6 +338,7 @@ class Trajectory:
             "horizon": list(self.horizon), "mode": list(self.mode),
             "level": list(self.level), "proof_covers_w": list(self.proof_covers_w),
             "guarantee": self.guarantee,
+            "x_ref": None if self.x_ref is None else _json_floats(self.x_ref),
             "violations": {k: (list(v) if isinstance(v, tuple) else v)
                            for k, v in self.violations.items()},
         }
@@ -391,7 +399,7 @@ class Trajectory:
                    certificate=tuple(data["certificate"]), horizon=tuple(data["horizon"]),
                    mode=tuple(data["mode"]), level=tuple(data.get("level", ())),
                    proof_covers_w=tuple(data.get("proof_covers_w", ())),
-                   guarantee=str(data.get("guarantee", "")),
+                   guarantee=str(data.get("guarantee", "")), x_ref=data.get("x_ref"),
                    violations=data["violations"], model=model,
                    stop_reason=data["stop_reason"], disturbance=data["disturbance"],
                    seed=data["seed"], model_name=data["model_name"])
@@ -871,7 +879,16 @@ def simulate(model: Model, ctrl: Any, x0: Any, steps: int, disturbance: Any = No
         stop_reason=reason, disturbance=label,
         seed=int(seed) if isinstance(seed, (int, np.integer)) else None,
         model_name=model.name, level=tuple(level), proof_covers_w=tuple(covers),
-        guarantee=controller.guarantee)
+        guarantee=controller.guarantee, x_ref=_x_ref_of(ctrl, model.n))
+
+
+def _x_ref_of(controller: Any, n: int) -> np.ndarray | None:
+    """The state the controller regulates to (its ``x_ref``, (n,)), or None."""
+    ref = getattr(controller, "x_ref", None)
+    if ref is None:
+        return None
+    ref = np.asarray(ref, dtype=float).reshape(-1)
+    return ref if ref.shape == (n,) else None
 
 
 def _record(info: Mapping[str, Any] | None, mode: str, elapsed: float, levels: bool = False

@@ -268,3 +268,23 @@ def test_a_saved_sequence_keeps_the_w_of_its_proofs(tmp_path) -> None:
     big = cm.Model(x=m.x, u=m.u, w=m.w, f=m.f, X=m.X, U=m.U, W=cm.Box([-0.2], [0.2]))
     with pytest.warns(cm.CmpcWarning, match="not for every w"):
         cm.SetSequenceMPC(big, back, solver="sqp")
+
+
+def test_the_reference_defaults_to_the_local_laws_equilibrium(tmp_path) -> None:
+    """SetSequenceMPC regulates to the equilibrium of a LinearLaw local law (not to 0),
+    and a run's summary gives the final error from that reference beside the norm of x."""
+    m = _model()
+    seq = cm.controllable_sets(m, T, 0.25, robust=True, law=np.zeros((1, 2)), max_steps=2,
+                               progress=False)
+    law = cm.LinearLaw(np.zeros((1, 2)), x_eq=[0.25, -0.5], u_eq=[0.0])
+    ctrl = cm.SetSequenceMPC(m, seq, solver="sqp", local_law=law)
+    np.testing.assert_array_equal(ctrl.x_ref, [0.25, -0.5])
+    assert np.array_equal(cm.SetSequenceMPC(m, seq, solver="sqp", x_ref=[0.0, 0.0]).x_ref,
+                          [0.0, 0.0])
+    tr = cm.simulate(m, ctrl, x0=[0.5, 0.5], steps=3, progress=False)
+    s = tr.summary()
+    xK = tr.x[-1]
+    assert s["final_norm_inf"] == pytest.approx(np.abs(xK).max())
+    assert s["final_error_inf"] == pytest.approx(np.abs(xK - [0.25, -0.5]).max())
+    back = type(tr).load(tr.save(tmp_path / "t.json"))
+    assert back.summary()["final_error_inf"] == s["final_error_inf"]
