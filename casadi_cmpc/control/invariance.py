@@ -674,7 +674,8 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
     W : Box, optional
         Disturbance box (default: the model's W): robust invariance.
     center : array_like (n,), optional
-        Centre of the candidates (default: the origin).
+        Centre of the candidates (default: the equilibrium ``x_eq`` of a
+        :class:`LinearLaw`, else the origin).
     relative_eps : bool
         See ``eps_sivia``. The thesis' value for E6 (0.05) exceeds the generators of every
         candidate there, so read as an absolute tolerance it would allow no bisection at
@@ -738,6 +739,8 @@ def largest_invariant_zonotope(model: Model, law: Any, M0: Any, eps_opt: float,
     M0a = _interval_matrix(M0, n)
     eps_opt = positive_eps(eps_opt, "eps_opt")
     eps_sivia = positive_eps(eps_sivia, "eps_sivia")
+    if center is None:  # the equilibrium of a LinearLaw, when it names one
+        center = getattr(law, "x_eq", None)
     c = _vector(center, n, "center", np.zeros(n))
     closed = _closed(model, law)  # compiled once for all the tests
     X = getattr(model, "X", None)

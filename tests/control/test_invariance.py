@@ -359,3 +359,21 @@ def test_largest_invariant_zonotope_refuses_bad_inputs():
         cm.largest_invariant_zonotope(model, K, [[[1.0, 0.0]], [[0.0, 1.0]]], 0.1, 0.1)
     with pytest.raises(ValueError, match="eps_opt"):
         cm.largest_invariant_zonotope(model, K, [[[0.0, 1.0]], [[0.0, 1.0]]], 0.0, 0.1)
+
+
+def test_largest_invariant_zonotope_centres_at_the_laws_equilibrium():
+    """Without ``center`` the candidates are centred at the LinearLaw's x_eq (3, 3), where
+    the contracting closed loop keeps them; at the origin they would lie outside X."""
+    import casadi as ca
+
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
+    xe = np.array([3.0, 3.0])
+    f = xe + 0.5 * (x - xe) + ca.vertcat(0, 0.1) * u
+    m = cm.Model(x, u, f, X=cm.Box([2, 2], [4, 4]), U=cm.Box([-1], [1]), name="shifted")
+    law = cm.LinearLaw(np.zeros((1, 2)), x_eq=xe, u_eq=[0.0])
+    M0 = np.zeros((2, 2, 2))
+    M0[0, 0] = M0[1, 1] = [0.0, 0.5]
+    r = cm.largest_invariant_zonotope(m, law, M0, eps_opt=0.05, eps_sivia=0.05,
+                                      progress=False)
+    assert r.status == cm.Status.PROVED
+    np.testing.assert_array_equal(r.zonotope.center, xe)
