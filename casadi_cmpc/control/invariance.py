@@ -39,7 +39,7 @@ __all__ = ["certify_invariant", "local_lqr", "largest_invariant_zonotope",
 
 
 def local_lqr(model: Model, Q: Any, R: Any, x_eq: Any = None, u_eq: Any = None,
-              w: Any = None) -> np.ndarray:
+              w: Any = None) -> LinearLaw:
     """The LQR law ``u = u_eq + K (x - x_eq)`` of the linearisation at an equilibrium.
 
     Parameters
@@ -426,6 +426,9 @@ def check_about(cert: Any, model: Model, S: Any, W: Any, law: Any = None) -> str
         return ("it does not say what it is about (a Certificate of cm.certify_invariant "
                 "records the model, the set, the law and W)")
     if ab.get("model_key") != model_key(model):
+        if ab.get("model") == model.name:  # one name, two maps
+            return (f"it is about another model of the same name '{model.name}' (another "
+                    "map f, or other parameters)")
         return f"it is about another model ('{ab.get('model')}'), not '{model.name}'"
     T = ab.get("set")
     same = T is S or (type(T) is type(S) and all(

@@ -256,7 +256,8 @@ def _controls(u_seq: Any, m: int) -> np.ndarray:
 def reach(model: Any, X0: Any, u_seq: Any, method: str = "zonotope", W: Any = None,
           max_order: float | None = None, inclusion: str = "natural",
           refine: bool = True) -> list[Any]:
-    r"""Outer bounds of the reachable sets ``X(1), ..., X(i)`` over a given control sequence.
+    r"""Outer bounds of the reachable sets ``X(0), X(1), ..., X(i)`` over a given control
+    sequence.
 
     Thesis Def 6.2 and §6.3.2: ``X(k+1) = f(X(k), u(k), W)``; the zonotope bounds are the
     evolution of Fig 6.10 with reduced wrapping effect, the interval bounds the natural
