@@ -1022,7 +1022,10 @@ def main(argv: list[str] | None = None) -> int:
     p_exp.add_argument("--solver", choices=("sqp", "ipopt"), default="sqp",
                        help="'sqp' (default): standalone C; 'ipopt': links casadi's IPOPT")
     p_exp.add_argument("--controller", choices=("auto", "sequence", "contractive"),
-                       default="auto", help="as for 'cmpc run'")
+                       default="auto",
+                       help="as for 'cmpc run', except that khalil_affine_state exports its "
+                            "contractive MPC (its affine-state sets, polytope pieces, have no "
+                            "C form; 'sequence' is refused there)")
     p_exp.add_argument("--overwrite", action="store_true",
                        help="replace the contents of a non-empty --out directory")
     p_exp.add_argument("--build", action="store_true",
