@@ -5,7 +5,8 @@ Prints one JSON line, measured in one run:
 * ``workers``: the E9 robust controllable sequence at eps 0.025, serial against a
   ``ProcessPoolExecutor(2)`` (target: speedup >= 1.7 on a 2-core machine) and against a Dask
   ``LocalCluster`` of 2 worker processes (its overhead against the pool); the sets must be
-  identical.
+  identical. Beside them: the ceiling of two processes on this machine (two serial runs at
+  once), and the searches, levels and pairs of the sequence.
 * ``growth``: ``one_step_set`` (nominal and robust) on a chain model of n = 2, 3, 4 states
   (``x_i+ = x_i + 0.1 x_{i+1}``, the last state driven by ``u - 0.5 sin(x_0)`` and an
   additive w), at several eps: seconds, pairs classified, peak traced memory (MB) and the
@@ -189,18 +190,89 @@ def _e9(executor=None) -> tuple[float, list]:
     return time.perf_counter() - t0, [s["boxes"] for s in seq.steps]
 
 
+def _e9_seconds(_: int = 0) -> float:
+    """One serial E9 sequence in a pool process: its seconds."""
+    return _e9()[0]
+
+
+def _e9_levels() -> dict:
+    """The serial E9 sequence level by level: searches, levels and pairs, and the fit
+    ``level seconds = a + b pairs`` (least squares over the levels; the last level of each
+    search, whose end is not seen, left out): ``a`` is what a level costs whatever its size
+    (classification calls, reduction, bisection, bookkeeping), which every process of a
+    split search pays for each of its levels."""
+    from casadi_cmpc.control import controllable as C
+    from casadi_cmpc.solvers import _parallel as P
+
+    marks: list[tuple[int, float]] = []  # (pairs, start) per level; (-1, end) per search
+    searches: list = []
+    orig_bnb, orig_call = C.branch_and_bound, P.LevelRunner.__call__
+
+    def counting(*a, **k):
+        out = orig_bnb(*a, **k)
+        marks.append((-1, time.perf_counter()))
+        searches.append(out)
+        return out
+
+    def timed(self, classify, frontier):
+        marks.append((len(frontier), time.perf_counter()))
+        return orig_call(self, classify, frontier)
+
+    C.branch_and_bound, P.LevelRunner.__call__ = counting, timed
+    try:
+        _e9()
+    finally:
+        C.branch_and_bound, P.LevelRunner.__call__ = orig_bnb, orig_call
+    N, dt = [], []
+    for (n0, t0), (n1, t1) in zip(marks[:-1], marks[1:], strict=True):
+        if n0 >= 0 and n1 >= 0:
+            N.append(n0)
+            dt.append(t1 - t0)
+    A = np.column_stack([np.ones(len(N)), N])
+    a, b = np.linalg.lstsq(A, np.asarray(dt), rcond=None)[0]
+    levels = sum(o.levels for o in searches)
+    return {"searches": len(searches), "levels": levels,
+            "pairs": sum(o.n_classified for o in searches),
+            "per_level_fixed_ms": 1e3 * a, "per_pair_us": 1e6 * b,
+            "fixed_s": a * levels}
+
+
 def _same(a: list, b: list) -> bool:
     return len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
 
 
-def workers(dask: bool) -> dict:
+def _mid(v: list[float]) -> float:
+    return float(np.median(v))
+
+
+def workers(dask: bool, rounds: int = 3) -> dict:
+    """Serial against 2 pool processes on the E9 sequence, ``rounds`` times interleaved
+    (medians and ranges: the machine is shared). Beside them the machine's own ceiling for
+    two processes: two serial runs at once, one per pool process; ``2 serial / their wall
+    time`` is what a split of perfectly divisible work with no overhead could reach."""
     _e9()  # compile and load every kernel once
-    t_serial, ref = _e9()
+    ser, par, two = [], [], []
+    same = True
     with ProcessPoolExecutor(2) as pool:
         _e9(pool)  # the workers' kernels
-        t_pool, got = _e9(pool)
-    same = _same(ref, got)
-    out = {"serial_s": t_serial, "pool2_s": t_pool, "speedup_pool2": t_serial / t_pool,
+        list(pool.map(_e9_seconds, range(2)))
+        for _ in range(rounds):
+            t, ref = _e9()
+            ser.append(t)
+            t, got = _e9(pool)
+            par.append(t)
+            same &= _same(ref, got)
+            t0 = time.perf_counter()
+            list(pool.map(_e9_seconds, range(2)))
+            two.append(time.perf_counter() - t0)
+    lv = _e9_levels()
+    ratio = [s / p for s, p in zip(ser, par, strict=True)]
+    ceiling = [2 * s / w for s, w in zip(ser, two, strict=True)]
+    out = {"serial_s": _mid(ser), "pool2_s": _mid(par), "speedup_pool2": _mid(ratio),
+           "speedup_range": [min(ratio), max(ratio)],
+           "ceiling_two_processes": _mid(ceiling),
+           "ceiling_range": [min(ceiling), max(ceiling)],
+           **lv, "fixed_share_of_serial": lv["fixed_s"] / _mid(ser),
            "identical_pool": bool(same), "target_speedup": ">= 1.7"}
     if dask:
         try:
@@ -214,7 +286,7 @@ def workers(dask: bool) -> dict:
             ex = client.get_executor()
             _e9(ex)
             t_dask, got = _e9(ex)
-        out.update({"dask2_s": t_dask, "dask_over_pool": t_dask / t_pool,
+        out.update({"dask2_s": t_dask, "dask_over_pool": t_dask / out["pool2_s"],
                     "identical_dask": _same(ref, got)})
     return out
 
