@@ -899,11 +899,13 @@ def linear_controllable_sets(model: Model, target: Any, max_steps: int = 50,
         K_{i-1} up to the tolerance of the LP inclusion tests, member by member (a
         stopping rule: it does not prove that K_{i-1} is control invariant).
     """
-    from .controllable import NO_W, ROBUST
+    from .controllable import NO_W, ROBUST, proof_w_box
+    from .invariance import model_key
 
     _check_linear(model)
     seq = SetSequence(sets=[target], info={
-        "model": model.name, "robust": bool(model.l),
+        "model": model.name, "robust": bool(model.l), "model_key": model_key(model),
+        "proof_W": proof_w_box(model, True),
         "semantics": ROBUST if model.l else NO_W,
         "method": "pre_set: exact rational pre-sets, rows rounded inward (inner sets)",
         "state_names": [f"x{i + 1}" for i in range(model.n)]})

@@ -90,7 +90,9 @@ def block_lp(C: np.ndarray, rows_A: np.ndarray, rows_b: np.ndarray, row_block: n
     rows_b = np.asarray(rows_b, dtype=float).ravel()
     row_block = np.asarray(row_block, dtype=np.int64).ravel()
     if np.isnan(rows_b).any() or (rows_b == -np.inf).any():
-        raise ValueError("block_lp: right-hand sides must be finite or +inf")
+        raise ValueError("a linear program got a row a.x <= b with b = -inf or NaN (for a "
+                         "polytope: a row with b / |a| below -1.8e308, which no point of "
+                         "the floating-point range satisfies); rescale the data")
     LB = np.broadcast_to(np.asarray(lb, dtype=float), (K, p))
     UB = np.broadcast_to(np.asarray(ub, dtype=float), (K, p))
     if row_block.size and np.any(np.diff(row_block) < 0):

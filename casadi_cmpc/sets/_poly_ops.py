@@ -139,7 +139,9 @@ def is_subset(P: Polytope, other: Any, tol: float | None = None) -> bool:
     if QR.An.shape[0] == 0:
         return True
     h = np.asarray(P.support(QR.An))
-    return bool(np.all(h <= QR.bn + tol_))
+    # an unbounded direction of P is never inside a row, even one whose offset lies
+    # beyond the double range (bn = +inf): the real half-space still ends
+    return bool(np.all((h <= QR.bn + tol_) & (h < np.inf)))
 
 
 def subset_of_union(P: Polytope, U: PolytopeUnion, budget: CoverBudget | None = None,

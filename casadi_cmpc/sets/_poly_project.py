@@ -33,7 +33,9 @@ def vertices(P: Polytope) -> np.ndarray:
         return V.copy()
     P._require_bounded_nonempty("the vertex list")
     R = P._rows()
-    if not np.isfinite(R.bn).all() and not np.isfinite(P.bounding_box().as_array()).all():
+    if (R.bn == -np.inf).any() or (
+            not np.isfinite(R.bn).all()
+            and not np.isfinite(P.bounding_box().as_array()).all()):
         raise SolverError("the polytope reaches beyond the floating-point range (a row "
                           "with b / |a| above 1.8e308): its vertices cannot be "
                           "represented; rescale the data")
@@ -41,7 +43,7 @@ def vertices(P: Polytope) -> np.ndarray:
     if _hull._cdd() is not None:
         # rows rounded to nearest, then outward (a thin set far from the origin may
         # lose its thickness to rounding), then the LP route
-        fin = np.isfinite(R.bz)  # (rows beyond the double range constrain nothing)
+        fin = R.bz < np.inf  # (rows beyond the double range constrain nothing)
         for bz in (R.bz0, R.bz):
             try:
                 V = R.c0 + R.s * _hull.cdd_vertices(R.An[fin], bz[fin])
@@ -70,7 +72,7 @@ def vertices_fallback(P: Polytope) -> np.ndarray:
     R = P._rows()
     c, r = P._chebyshev()
     if np.isfinite(r) and r > 1e-7 * R.s and P.dim > 1:
-        fin = np.isfinite(R.bn)  # (rows beyond the double range constrain nothing)
+        fin = R.bn < np.inf  # (rows beyond the double range constrain nothing)
         return _hull.halfspace_vertices(R.An[fin], R.bn[fin], c)
     Q = project_support(P, list(range(P.dim)))
     return np.array(Q._cache["vertices"])

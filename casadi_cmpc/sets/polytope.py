@@ -317,7 +317,8 @@ class Polytope(SetBase):
         with np.errstate(over="ignore"):
             # +inf where b / |a| lies beyond the largest double: such a row excludes no
             # point of the double range, and the LPs drop it (a superset: sound for what
-            # they prove, emptiness, separation and upper support bounds)
+            # they prove, emptiness, separation and upper support bounds); -inf where it
+            # lies below -DBL_MAX: no double point satisfies it (see bz below)
             bn = np.ldexp(b_k, -ex) / ns
         far = ~np.isfinite(bn)
         n = A.shape[1]
@@ -350,7 +351,10 @@ class Polytope(SetBase):
             bz = bz0 + slack
             bz = np.where(np.isfinite(bz), bz, (bn - An @ c0) / scale)
             bz0 = np.where(np.isfinite(bz0), bz0, bz)
-            bz[far] = bz0[far] = np.inf
+            # beyond the double range: +inf, a row that excludes no double point (the LPs
+            # leave it out); -inf, a row no double point satisfies (the LPs refuse it with
+            # a clear error rather than read it as vacuous)
+            bz[far] = bz0[far] = np.where(bn[far] > 0, np.inf, -np.inf)
         r = _Rows(A_k, b_k, An, bn, trivially_empty, RTOL * scale, c0, scale, bz, bz0, ex,
                   ns)
         self._cache["rows"] = r

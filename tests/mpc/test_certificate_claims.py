@@ -288,3 +288,15 @@ def test_the_reference_defaults_to_the_local_laws_equilibrium(tmp_path) -> None:
     assert s["final_error_inf"] == pytest.approx(np.abs(xK - [0.25, -0.5]).max())
     back = type(tr).load(tr.save(tmp_path / "t.json"))
     assert back.summary()["final_error_inf"] == s["final_error_inf"]
+
+
+def test_linear_sequences_say_for_which_w_and_model_their_sets_hold() -> None:
+    """linear_controllable_sets records proof_W and the model key, so a controller with a
+    larger W warns and claims no step bound (it accepted any W)."""
+    m = _model()
+    seq = cm.linear_controllable_sets(m, T, max_steps=2)
+    assert seq.info["proof_W"] == [[-0.1], [0.1]] and seq.info["model_key"]
+    big = cm.Model(x=m.x, u=m.u, w=m.w, f=m.f, X=m.X, U=m.U, W=cm.Box([-1.0], [1.0]))
+    with pytest.warns(cm.CmpcWarning, match="not for every w"):
+        ctrl = cm.SetSequenceMPC(big, seq, solver="lp")
+    assert "at most i steps" not in ctrl.guarantee

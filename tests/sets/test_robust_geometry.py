@@ -459,3 +459,24 @@ def test_hull_of_many_points_needs_no_n_by_n_matrix():
     pts = rng.normal(size=(60_000, 3))
     P = cm.Polytope.from_vertices(pts)
     assert P.contains(pts[::97]).all() and P.is_full_dimensional()
+
+
+def test_a_row_below_the_double_range_is_refused_not_read_as_vacuous():
+    """``1e-300 x1 <= -1e10`` (x1 <= -1e310) holds at no double point: with the unit
+    box the set is empty over the reals. Exact tests answer exactly; the LP-based ones
+    refuse with a clear error instead of dropping the row (they gave the unit box's
+    vertices and volume)."""
+    A = np.array([[1.0, 0], [-1.0, 0], [0, 1.0], [0, -1.0], [1e-300, 0.0]])
+    P = cm.Polytope(A, np.array([1.0, 0.0, 1.0, 0.0, -1e10]))
+    assert not P.contains_box(np.array([[[0.2, 0.4], [0.2, 0.4]]]))[0]
+    assert not P.contains(np.array([[0.5, 0.5]]))[0]
+    for op in (P.volume, P.bounding_box, P.minimal, P.chebyshev_ball):
+        with pytest.raises(ValueError, match="floating-point range"):
+            op()
+
+
+def test_an_unbounded_set_is_not_inside_a_far_row():
+    """{x1 >= 0} is not inside {1e-300 x1 <= 1e10} = {x1 <= 1e310} (over the reals)."""
+    P = cm.Polytope(np.array([[-1.0, 0.0]]), np.array([0.0]))
+    Q = cm.Polytope(np.array([[1e-300, 0.0]]), np.array([1e10]))
+    assert not P.is_subset(Q)
