@@ -87,7 +87,7 @@ def _two_prod(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     bl = b - bh
     e = ((ah * bh - p) + ah * bl + al * bh) + al * bl
     big = 2.0 ** 995
-    ok = ((np.abs(a) < big) & (np.abs(b) < big)
+    ok = ((np.abs(a) < big) & (np.abs(b) < big) & (np.abs(p) < 2.0 ** 1000)
           & ((p == 0) & ((a == 0) | (b == 0)) | (np.abs(p) >= 2.0 ** -960)))
     return p, e, ok
 
@@ -107,7 +107,7 @@ def exact_dot_le(X: np.ndarray, W: np.ndarray, b: np.ndarray) -> np.ndarray:
     P, E, ok = _two_prod(W, X)
     out = np.empty(X.shape[0], dtype=bool)
     for i in range(X.shape[0]):
-        if ok[i].all():
+        if ok[i].all() and abs(float(b[i])) < 2.0 ** 1000 and X.shape[1] < 2 ** 20:
             # math.fsum is correctly rounded, so its sign is the sign of the exact sum
             s = math.fsum([*P[i].tolist(), *E[i].tolist(), -float(b[i])])
             out[i] = s <= 0.0
@@ -137,7 +137,14 @@ class BoxKernel:
         self.c = 4.0 * (n + 4) * 2.0 ** -52
         Ap = np.maximum(A, 0.0).T
         Am = np.maximum(-A, 0.0).T
-        self.calpha = self.c * np.abs(A).max(axis=1, initial=0.0)
+        alpha = np.abs(A).max(axis=1, initial=0.0)
+        # rounded up, and never 0 for a nonzero row (c alpha underflows for subnormal rows)
+        self.calpha = np.where(alpha > 0, np.nextafter(self.c * alpha, np.inf), 0.0)
+        # the float paths assume no sum overflows: |a| |x| sums stay below 2**1000 when
+        # every |x| <= self._xmax (boxes beyond it are decided exactly)
+        self._xmax = 2.0 ** 1000 / ((2 * n + 2) * max(float(alpha.max(initial=0.0)), 1e-300))
+        if not np.all(np.abs(b) < 2.0 ** 1000):
+            self._xmax = 0.0
         self.b_up = np.nextafter(b - _TINY, -np.inf)
         self.b_lo = np.nextafter(b + _TINY, np.inf)
         W_up = np.empty((2 * n + 2, m))
@@ -183,23 +190,34 @@ class BoxKernel:
             else:
                 t = np.where(A > 0, A * lo, np.where(A < 0, A * hi, 0.0))
             val = t.sum(axis=2)
-            E = np.where(np.isfinite(t), np.abs(t), 0.0).sum(axis=2) * self.c
+            absum = np.where(np.isfinite(t), np.abs(t), 0.0).sum(axis=2)
+            E = absum * self.c
+            # every term finite but the sum (or its magnitude) not: an overflow, which
+            # decides nothing; such rows are decided exactly
+            ovf = np.isfinite(t).all(axis=2) & ~(np.isfinite(val) & (absum < 2.0 ** 1000))
             if not up:
-                return (val - E) > self.b_lo  # NaN compares False
-            res = (val + E) <= self.b_up
-            amb = ~res & np.isfinite(val) & (val - E <= self.b)
+                res = ((val - E) > self.b_lo) & ~ovf  # NaN compares False
+            else:
+                res = ((val + E) <= self.b_up) & ~ovf
+            amb = ~res & np.isfinite(val) & (val - E <= self.b) if up else ovf & False
+            amb = amb | ovf
         bi, kr = np.nonzero(amb)
         if bi.size:
             # with a finite value, infinite bounds only meet zero weights: drop them
             flat = boxes.reshape(boxes.shape[0], 2 * self.n)
             X = np.where(np.isfinite(flat[bi]), flat[bi], 0.0)
-            res[bi, kr] = exact_dot_le(X, self.WT_up[kr, :-2], self.b[kr])
+            W = (self.WT_up if up else self.WT_lo)[kr, :-2]
+            le = exact_dot_le(X, W, self.b[kr])
+            res[bi, kr] = le if up else ~le
         return res
 
     def _flat(self, boxes: np.ndarray) -> tuple[np.ndarray, float]:
-        """The (N, 2n) view and ``max |x|`` (not finite when some bound is infinite)."""
+        """The (N, 2n) view and ``max |x|`` (not finite when some bound is infinite, and
+        reported as infinite when a sum of the float paths could overflow: the exact
+        path of :meth:`_slow` then decides)."""
         flat = boxes.reshape(boxes.shape[0], 2 * self.n)
-        return flat, float(np.abs(flat).max(initial=0.0))
+        amax = float(np.abs(flat).max(initial=0.0))
+        return flat, (amax if amax <= self._xmax else np.inf)
 
     def holds(self, boxes: np.ndarray) -> np.ndarray:
         """(N, m) bool: the half-space of row k surely contains the box."""
@@ -286,8 +304,11 @@ def exact_points_le(X: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
         S = X @ A.T - b[None, :]
         mag = np.abs(X) @ np.abs(A).T + np.abs(b)[None, :]
         err = _gamma(n + 2) * mag + 1e-300
-    sure_in = (S <= -err) | (b[None, :] == np.inf)
-    sure_out = (S > err) | (b[None, :] == -np.inf)
+    # a float decision needs a finite magnitude: with |A| |x| + |b| finite no partial sum
+    # overflowed (an overflow gives S = -inf <= -err = -inf, not a proof)
+    fin = np.isfinite(mag) & np.isfinite(S)
+    sure_in = (fin & (S <= -err)) | (b[None, :] == np.inf)
+    sure_out = (fin & (S > err)) | (b[None, :] == -np.inf)
     inside = sure_in.all(axis=1)
     out = sure_out.any(axis=1)
     undecided = np.flatnonzero(~inside & ~out)

@@ -480,3 +480,51 @@ def test_an_unbounded_set_is_not_inside_a_far_row():
     P = cm.Polytope(np.array([[-1.0, 0.0]]), np.array([0.0]))
     Q = cm.Polytope(np.array([[1e-300, 0.0]]), np.array([1e10]))
     assert not P.is_subset(Q)
+
+
+def _exact_le(row, bi, x):
+    return sum((Fraction(float(a)) * Fraction(float(v)) for a, v in zip(row, x, strict=True)),
+               Fraction(0)) <= Fraction(float(bi))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(2, 4), seed=st.integers(0, 2 ** 31), k=st.integers(1, 5))
+def test_box_and_point_tests_hold_at_extreme_magnitudes(n, seed, k):
+    """Rows with entries from 1e-300 to 1e300 (mixed within a row), right-hand sides and
+    points whose products overflow or underflow part-way: ``contains`` is exact,
+    ``contains_box`` True has every corner inside, ``intersects_box`` False has no corner
+    inside (all checked in rational arithmetic); an overflowed float sum proves nothing."""
+    rng = np.random.default_rng(seed)
+    A = rng.choice([-1.0, 1.0], (k, n)) * 10.0 ** rng.uniform(-300, 300, (k, n))
+    A[rng.random((k, n)) < 0.2] = 0.0
+    X = rng.choice([-1.0, 1.0], (6, n)) * 10.0 ** rng.uniform(-10, 10, (6, n))
+    X = np.vstack([X, 10.0 ** rng.uniform(5, 9) * rng.uniform(-1, 1, (4, n))])
+    # right-hand sides at the values of the rows at some points (touching, overflowing)
+    vals = np.array([float(np.clip(np.dot(A[i], X[i % X.shape[0]]), -1e308, 1e308))
+                     for i in range(k)])
+    b = np.where(np.isfinite(vals), vals * rng.choice([0.5, 1.0, 2.0], k), 1e300)
+    P = cm.Polytope(A, b)
+    inside = P.contains(X)
+    for x, got in zip(X, inside, strict=True):
+        assert got == all(_exact_le(A[i], b[i], x) for i in range(k))
+    boxes = np.stack([X, X * (1 + 1e-12) + 1e-300], axis=-1)
+    boxes = np.sort(boxes, axis=-1)
+    cin = P.contains_box(boxes)
+    meet = P.intersects_box(boxes)
+    for q in range(boxes.shape[0]):
+        corners_ = corners(boxes[q])
+        if cin[q]:
+            assert all(_exact_le(A[i], b[i], c) for c in corners_ for i in range(k))
+        if not meet[q]:
+            assert not any(all(_exact_le(A[i], b[i], c) for i in range(k)) for c in corners_)
+
+
+def test_overflowing_sums_are_no_proof():
+    """The review's cases: exact a.x = -5e307 > b = -6e307 (outside), and the point with
+    the signs flipped (inside)."""
+    A = np.array([[-1e300, -1e300, 1e300]])
+    x = np.array([1e8, 1e8, 1.5e8])
+    P = cm.Polytope(A, np.array([-6e307]))
+    assert not P.contains(x[None])[0] and not P.contains_box(np.stack([x, x], -1)[None])[0]
+    Q = cm.Polytope(-A, np.array([6e307]))
+    assert Q.contains(x[None])[0] and Q.intersects_box(np.stack([x, x], -1)[None])[0]
