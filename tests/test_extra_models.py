@@ -151,14 +151,17 @@ def test_local_law_keeps_sampled_states_inside_for_50_steps(example):
 
 
 def test_compute_terminal_reproduces_the_stored_numbers():
-    """The three-tank constants are what cm.terminal_set returns (2-3 s)."""
+    """The three-tank constants are what cm.terminal_set returns (2-3 s), up to the last
+    bits of the LQR gain, which LAPACK computes differently on different CPUs."""
     res = three_tank.compute_terminal()
     ex = cm.models.load("three_tank")
     assert res.success and res.robust and res.shape == "parallelotope"
-    assert res.law == ex.local_law
-    assert np.array_equal(res.terminal.A, ex.terminal.A)
-    assert np.array_equal(res.terminal.b, ex.terminal.b)
-    assert res.scale == three_tank.SCALE
+    np.testing.assert_allclose(res.law.K, ex.local_law.K, rtol=1e-10)
+    np.testing.assert_array_equal(res.law.x_eq, ex.local_law.x_eq)
+    np.testing.assert_array_equal(res.law.u_eq, ex.local_law.u_eq)
+    np.testing.assert_allclose(res.terminal.A, ex.terminal.A, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(res.terminal.b, ex.terminal.b, rtol=1e-9)
+    assert res.scale == pytest.approx(three_tank.SCALE, rel=1e-9)
 
 
 def test_cartpole_constants_match_the_local_lqr():
