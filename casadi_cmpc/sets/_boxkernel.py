@@ -199,8 +199,8 @@ class BoxKernel:
                 res = ((val - E) > self.b_lo) & ~ovf  # NaN compares False
             else:
                 res = ((val + E) <= self.b_up) & ~ovf
-            amb = ~res & np.isfinite(val) & (val - E <= self.b) if up else ovf & False
-            amb = amb | ovf
+            # decided exactly: overflowed rows, and (up) rows the rounding bound leaves open
+            amb = ovf | (~res & np.isfinite(val) & (val - E <= self.b) if up else ovf)
         bi, kr = np.nonzero(amb)
         if bi.size:
             # with a finite value, infinite bounds only meet zero weights: drop them
